@@ -1,0 +1,56 @@
+"""ament_python package ship_ident: pip-installable as well as colcon-buildable."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "ship_ident"
+
+ROS_WHEELS = [  # only where no ROS 2 install provides rclpy (pip-only machines)
+    "ros-kilted-rclpy[fastrtps]==9.1.2",
+    "ros-kilted-std-msgs",
+    "ros-kilted-sensor-msgs",
+    "ros-kilted-diagnostic-msgs",
+    "ros-kilted-rosgraph-msgs",
+    "ros-kilted-geometry-msgs",
+]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/bags", glob("bags/*.mcap")),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "setuptools",
+        "numpy",
+        "scipy",
+        "numba",
+        "matplotlib",
+        "filterpy",
+        "mcap",
+        "mcap-ros2-support",
+        "rosbags",
+    ],
+    extras_require={
+        "ros": ROS_WHEELS,
+        "test": ["pytest", "pytest-xdist", "hypothesis", "colcon-common-extensions"],
+        "bench": ["sysidentpy", "dask[distributed]"],
+    },
+    zip_safe=True,
+    maintainer="ship_ident team",
+    maintainer_email="team@ship-ident.invalid",
+    description="Online identification of USV steering dynamics with LS-SVM",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "identifier_node = ship_ident.node:main",
+            "ship-ident = ship_ident.cli:main",
+        ],
+    },
+)

@@ -1,0 +1,58 @@
+"""``ship-ident``: the command-line door onto the numeric core.
+
+Each subcommand lives in ``ship_ident/commands/<name>.py`` and provides
+``add_parser(subparsers)`` (which sets ``func``) and its run function. Every
+error a user can cause ends in one line on stderr and exit code 2.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS = ("simulate", "identify", "compare", "replay", "play", "diagnose", "bench")
+
+EXIT_USAGE = 2
+
+
+class CommandError(Exception):
+    """A user-facing failure: printed as one line, exit code 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ship-ident",
+        description="Identify USV steering models (Nomoto) from bags and CSV files, replay bags, "
+                    "diagnose missing physics.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"ship_ident.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"ship_ident.commands.{name}":
+                raise
+            continue
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    from .dataset import DataError
+    from .estimators import MethodError
+    from .structure import StructureError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (CommandError, DataError, StructureError, MethodError, FileNotFoundError,
+            PermissionError, IsADirectoryError, ValueError) as exc:
+        print(f"ship-ident {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"ship-ident {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ship-ident, one module each."""

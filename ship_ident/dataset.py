@@ -1,0 +1,159 @@
+"""Steering data on a uniform time grid: the one input type of the numeric core.
+
+Units are SI throughout: time in s, rudder angle in rad, heading in rad
+(unwrapped, NED: positive clockwise seen from above), yaw rate in rad/s,
+forward speed in m/s. A positive rudder angle gives a positive yaw rate.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+
+class DataError(ValueError):
+    """Input data that cannot be used; the message says what is wrong and what to do."""
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """Uniformly sampled steering record.
+
+    ``segments`` lists half-open index ranges ``[start, stop)`` of contiguous
+    data; a gap in the source (longer than the gap threshold) splits the
+    record, and nothing is integrated or differentiated across a gap.
+    """
+
+    time: np.ndarray          # s, uniform step sample_time within each segment
+    rudder: np.ndarray        # rad
+    heading: np.ndarray       # rad, unwrapped
+    yaw_rate: np.ndarray      # rad/s
+    speed: np.ndarray | None = None  # m/s
+    segments: tuple[tuple[int, int], ...] = ()
+    gaps: tuple[tuple[float, float], ...] = ()  # (start s, end s) of gaps in the source
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        n = len(self.time)
+        for name in ("rudder", "heading", "yaw_rate"):
+            if len(getattr(self, name)) != n:
+                raise DataError(f"{name} has {len(getattr(self, name))} samples, time has {n}")
+        if self.speed is not None and len(self.speed) != n:
+            raise DataError(f"speed has {len(self.speed)} samples, time has {n}")
+        if not self.segments:
+            object.__setattr__(self, "segments", ((0, n),) if n else ())
+
+    @property
+    def n_samples(self) -> int:
+        return len(self.time)
+
+    @property
+    def sample_time(self) -> float:
+        """Sample time in s (the grid step)."""
+        if self.n_samples < 2:
+            return float(self.meta.get("sample_time", 0.1))
+        start, stop = max(self.segments, key=lambda s: s[1] - s[0])
+        return float(np.median(np.diff(self.time[start:stop]))) if stop - start > 1 else float(
+            np.median(np.diff(self.time)))
+
+    @property
+    def duration(self) -> float:
+        return float(self.time[-1] - self.time[0]) if self.n_samples else 0.0
+
+    def slice(self, start: int, stop: int) -> "Dataset":
+        """The samples ``[start, stop)`` as a new Dataset, segments clipped."""
+        segs = tuple((max(a, start) - start, min(b, stop) - start)
+                     for a, b in self.segments if min(b, stop) > max(a, start))
+        return replace(
+            self,
+            time=self.time[start:stop], rudder=self.rudder[start:stop],
+            heading=self.heading[start:stop], yaw_rate=self.yaw_rate[start:stop],
+            speed=None if self.speed is None else self.speed[start:stop],
+            segments=segs,
+            gaps=tuple(g for g in self.gaps
+                       if stop > start and self.time[start] <= g[0] <= self.time[stop - 1]),
+        )
+
+    def segment_datasets(self, min_samples: int = 2) -> list["Dataset"]:
+        """Each contiguous segment as its own Dataset."""
+        return [self.slice(a, b) for a, b in self.segments if b - a >= min_samples]
+
+    def check_finite(self) -> None:
+        """Raise DataError when any signal holds NaN or Inf."""
+        for name in ("time", "rudder", "heading", "yaw_rate", "speed"):
+            values = getattr(self, name)
+            if values is not None and not np.all(np.isfinite(values)):
+                bad = int(np.count_nonzero(~np.isfinite(values)))
+                raise DataError(f"{name} holds {bad} NaN/Inf samples; clean the data or let "
+                                "the reader drop them")
+
+
+def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_time: float,
+                    gap_threshold: float | None = None, unwrap_heading: bool = True,
+                    meta: dict | None = None) -> Dataset:
+    """Turn asynchronous time series into one uniformly sampled Dataset.
+
+    ``series`` maps ``rudder``, ``heading``, ``yaw_rate`` (and optionally
+    ``speed``) to ``(stamps_s, values)``. Non-finite samples are dropped,
+    stamps sorted and de-duplicated. The grid covers the span where every
+    signal has data; values are linearly interpolated (heading after
+    unwrapping). Where any signal has no sample for longer than
+    ``gap_threshold`` (default 5 sample times) the grid is cut: the gap is
+    reported in ``Dataset.gaps`` and the segments on each side stay apart.
+    """
+    if sample_time <= 0:
+        raise DataError(f"sample_time must be > 0 s, got {sample_time}")
+    gap_threshold = 5 * sample_time if gap_threshold is None else gap_threshold
+    clean: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name, (stamps, values) in series.items():
+        stamps = np.asarray(stamps, dtype=float)
+        values = np.asarray(values, dtype=float)
+        ok = np.isfinite(stamps) & np.isfinite(values)
+        stamps, values = stamps[ok], values[ok]
+        order = np.argsort(stamps, kind="stable")
+        stamps, values = stamps[order], values[order]
+        keep = np.concatenate(([True], np.diff(stamps) > 0)) if len(stamps) else np.zeros(0, bool)
+        stamps, values = stamps[keep], values[keep]
+        if name == "heading" and unwrap_heading and len(values):
+            values = np.unwrap(values)
+        clean[name] = (stamps, values)
+    required = ("rudder", "heading", "yaw_rate")
+    for name in required:
+        if name not in clean or len(clean[name][0]) < 2:
+            raise DataError(f"no usable {name} samples (need at least 2 finite samples)")
+    start = max(s[0] for s, _ in clean.values())
+    stop = min(s[-1] for s, _ in clean.values())
+    if stop - start < 2 * sample_time:
+        raise DataError("the signals do not overlap in time; check topic names and clocks")
+    grid = start + sample_time * np.arange(int(np.floor((stop - start) / sample_time + 1e-9)) + 1)
+    valid = np.ones(len(grid), dtype=bool)
+    gaps: list[tuple[float, float]] = []
+    for stamps, _ in clean.values():
+        steps = np.diff(stamps)
+        for i in np.flatnonzero(steps > gap_threshold):
+            a, b = stamps[i], stamps[i + 1]
+            gaps.append((float(a), float(b)))
+            valid &= ~((grid > a) & (grid < b))
+    out = {name: np.interp(grid, s, v) for name, (s, v) in clean.items()}
+    segments, i, n = [], 0, len(grid)
+    while i < n:
+        if not valid[i]:
+            i += 1
+            continue
+        j = i
+        while j < n and valid[j]:
+            j += 1
+        segments.append((i, j))
+        i = j
+    keep_idx = np.flatnonzero(valid)
+    remap = np.full(n, -1)
+    remap[keep_idx] = np.arange(len(keep_idx))
+    segments = [(int(remap[a]), int(remap[b - 1]) + 1) for a, b in segments]
+    gaps = sorted(set(gaps))
+    return Dataset(
+        time=grid[keep_idx], rudder=out["rudder"][keep_idx], heading=out["heading"][keep_idx],
+        yaw_rate=out["yaw_rate"][keep_idx],
+        speed=out["speed"][keep_idx] if "speed" in out else None,
+        segments=tuple(segments), gaps=tuple(gaps),
+        meta=dict(meta or {}, sample_time=sample_time),
+    )

@@ -1,0 +1,297 @@
+"""Physical effects as plug-ins.
+
+An effect is one object: a name, a sentence a sailor understands, its
+parameters (SI units), and hooks that say how it acts
+
+* in simulation: on the rudder (``effective_rudder``), as a yaw forcing
+  (``forcing_terms``), on the gains and time constants through speed
+  (``speed_scales``), or on the yaw-rate sensor (``measured_yaw_rate``);
+* in the equation-error regression: extra regressor columns and the map
+  from their coefficients back to the effect's parameters;
+* in diagnosis: ``evidence``, a score of how strongly the free-run residual
+  carries the effect's signature, and a sentence saying so.
+
+Every hook has a neutral default, so a new effect writes only what it
+changes. Register it with ``register_effect`` (see README, "Adding an effect").
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .integrate import TRIG_COS, TRIG_NONE, TRIG_SIN
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A physical parameter: SI unit, starting value and physical bounds for fits."""
+
+    name: str
+    unit: str
+    description: str
+    initial: float = 0.0
+    lower: float = -np.inf
+    upper: float = np.inf
+    display_unit: str = ""     # e.g. "deg" for angles shown to people
+    display_scale: float = 1.0  # SI value * display_scale = display value
+
+
+@dataclass(frozen=True)
+class ForcingTerm:
+    """One additive yaw forcing term ``coefficient * r**r_power * |r|**abs_power * trig(harmonic*psi)`` (rad/s)."""
+
+    coefficient: float
+    r_power: int = 0
+    abs_power: int = 0
+    harmonic: int = 0
+    trig: int = TRIG_NONE
+
+
+@dataclass
+class Evidence:
+    """How strongly the residual points to an effect: a score (larger: stronger) and a sentence."""
+
+    score: float
+    sentence: str
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = np.sqrt((a @ a) * (b @ b))
+    return float(a @ b / den) if den > 0 else 0.0
+
+
+def _partial_corr(residual: np.ndarray, feature: np.ndarray, controls: list[np.ndarray]) -> float:
+    """Correlation of residual and feature after removing the controls' linear part from the feature."""
+    if controls:
+        C = np.column_stack([np.ones_like(feature)] + controls)
+        feature = feature - C @ np.linalg.lstsq(C, feature, rcond=None)[0]
+    return _corr(residual, feature)
+
+
+class Effect:
+    """Base class: a physical effect that can be added to a Nomoto model."""
+
+    name: str = ""
+    explanation: str = ""
+    parameters: tuple[Parameter, ...] = ()
+    needs_speed: bool = False
+
+    # --- simulation hooks -------------------------------------------------
+    def effective_rudder(self, time: np.ndarray, rudder: np.ndarray, p: dict) -> np.ndarray:
+        """Rudder angle (rad) that acts on the hull, given the measured one."""
+        return rudder
+
+    def forcing_terms(self, p: dict) -> list[ForcingTerm]:
+        """State-dependent yaw forcing terms (rad/s) added to the right-hand side."""
+        return []
+
+    def speed_scales(self, speed: np.ndarray, p: dict) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per-sample multipliers of the gain K and of the time constants, or None."""
+        return None
+
+    def measured_yaw_rate(self, yaw_rate: np.ndarray, p: dict) -> np.ndarray:
+        """What the yaw-rate sensor reads (rad/s) when the hull turns at ``yaw_rate``."""
+        return yaw_rate
+
+    # --- regression hooks -------------------------------------------------
+    def prepare(self, signals) -> dict:
+        """Parameters fixed before the regression (e.g. a reference speed); may adjust ``signals``."""
+        return {}
+
+    def regressors(self, signals) -> dict[str, np.ndarray]:
+        """Extra regressor columns (name -> values) of the equation ``r = X w``."""
+        return {}
+
+    def from_coefficients(self, coefficients: dict, base: dict) -> dict:
+        """This effect's parameters from its regression coefficients and the base model's."""
+        return {p.name: p.initial for p in self.parameters}
+
+    # --- diagnosis --------------------------------------------------------
+    def evidence(self, context) -> Evidence:
+        """Signature of this effect in the free-run residual (see diagnose.ResidualContext)."""
+        return Evidence(0.0, f"no evidence test for {self.name}")
+
+    def describe(self) -> str:
+        return f"{self.name}: {self.explanation}"
+
+
+class RudderOffset(Effect):
+    name = "rudder_offset"
+    explanation = ("the boat holds a turn with the rudder at zero: a constant yaw moment "
+                   "(rudder misalignment, propeller asymmetry) worth a fixed rudder angle")
+    parameters = (Parameter("delta_r", "rad", "equivalent rudder offset", 0.0, -0.35, 0.35,
+                            "deg", np.degrees(1.0)),)
+
+    def effective_rudder(self, time, rudder, p):
+        return rudder + p["delta_r"]
+
+    def regressors(self, signals):
+        return {"1": np.ones_like(signals.r)}
+
+    def from_coefficients(self, coefficients, base):
+        return {"delta_r": coefficients["1"] / base["K"]}
+
+    def evidence(self, context):
+        e = context.equation_residual
+        t = float(np.mean(e) / (np.std(e) / np.sqrt(max(context.effective_samples, 1)) + 1e-12))
+        side = "starboard" if np.mean(e) > 0 else "port"
+        return Evidence(abs(t), f"the model's yaw-rate error has a steady bias to {side} "
+                        f"(t = {t:.1f}): a constant turning moment the rudder does not explain")
+
+
+class CubicYaw(Effect):
+    name = "cubic_yaw"
+    explanation = ("the boat's resistance to turning changes in tight turns: yaw damping grows "
+                   "(or shrinks) with the cube of the turn rate")
+    parameters = (Parameter("alpha", "s^2/rad^2", "cubic yaw damping coefficient", 0.0, -1e4, 1e4),)
+
+    def forcing_terms(self, p):
+        return [ForcingTerm(-p["alpha"], r_power=3)]
+
+    def regressors(self, signals):
+        return {"r^3": signals.r ** 3}
+
+    def from_coefficients(self, coefficients, base):
+        return {"alpha": -coefficients["r^3"]}
+
+    def evidence(self, context):
+        c = _partial_corr(context.equation_residual, context.signals.r ** 3, [context.signals.r])
+        return Evidence(abs(c) * np.sqrt(context.effective_samples),
+                        f"the error grows with the turn rate cubed (correlation {c:+.2f}): "
+                        "damping is not linear in tight turns")
+
+
+class RudderDelay(Effect):
+    name = "rudder_delay"
+    explanation = ("the hull answers the rudder later than the rudder sensor says: a dead time "
+                   "in the steering gear, the sensor or the data link")
+    parameters = (Parameter("tau", "s", "rudder dead time", 0.05, 0.0, 5.0),)
+
+    def effective_rudder(self, time, rudder, p):
+        return np.interp(time - p["tau"], time, rudder)
+
+    def evidence(self, context):
+        c = _partial_corr(context.equation_residual, -context.signals.delta_dot,
+                          [context.signals.delta])
+        note = ""
+        if context.parameters.get("T3", 1.0) <= 1e-6 or context.parameters.get("T3", 1.0) < 0:
+            note = "; T3 is pinned at its bound 0, which is what a delay looks like"
+        return Evidence(max(c, 0.0) * np.sqrt(context.effective_samples),
+                        f"the error follows the rudder rate with the sign of a lag "
+                        f"(correlation {c:+.2f}){note}: the hull answers later than the sensor says")
+
+
+class WindYaw(Effect):
+    name = "wind_yaw"
+    explanation = ("a steady wind or current turns the bow depending on the heading: the boat "
+                   "needs different rudder on different courses")
+    parameters = tuple(
+        Parameter(f"wind_{kind}{k}", "rad/s", f"{kind} harmonic {k} of heading of the wind/current yaw forcing",
+                  0.0, -1.0, 1.0)
+        for k in (1, 2) for kind in ("c", "s"))
+
+    def forcing_terms(self, p):
+        return [ForcingTerm(p[f"wind_c{k}"], harmonic=k, trig=TRIG_COS) for k in (1, 2)] + \
+               [ForcingTerm(p[f"wind_s{k}"], harmonic=k, trig=TRIG_SIN) for k in (1, 2)]
+
+    def regressors(self, signals):
+        return {f"{f.__name__}({k}psi)": f(k * signals.psi) for k in (1, 2) for f in (np.cos, np.sin)}
+
+    def from_coefficients(self, coefficients, base):
+        return {f"wind_{'c' if f == 'cos' else 's'}{k}": coefficients[f"{f}({k}psi)"]
+                for k in (1, 2) for f in ("cos", "sin")}
+
+    def evidence(self, context):
+        e = context.equation_residual
+        psi = context.signals.psi
+        C = np.column_stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)])
+        C = C - C.mean(axis=0)
+        e0 = e - e.mean()
+        coef = np.linalg.lstsq(C, e0, rcond=None)[0]
+        r2 = 1 - np.sum((e0 - C @ coef) ** 2) / max(np.sum(e0 ** 2), 1e-30)
+        spread = np.ptp(np.mod(psi, 2 * np.pi)) if len(psi) else 0.0
+        return Evidence(r2 * np.sqrt(context.effective_samples) * min(1.0, spread / np.pi),
+                        f"the error depends on the heading ({100 * r2:.0f} % of it explained by "
+                        "heading harmonics): a steady wind or current pushes the bow")
+
+
+class GyroBias(Effect):
+    name = "gyro_bias"
+    explanation = ("the rate gyro reads a small turn when the boat goes straight: its yaw rate "
+                   "disagrees with how fast the compass heading actually changes")
+    parameters = (Parameter("r_bias", "rad/s", "yaw-rate sensor bias", 0.0, -0.2, 0.2,
+                            "deg/s", np.degrees(1.0)),)
+
+    def measured_yaw_rate(self, yaw_rate, p):
+        return yaw_rate + p["r_bias"]
+
+    def prepare(self, signals):
+        bias = float(np.mean(signals.r_measured - signals.heading_rate))
+        signals.r = signals.r - bias
+        return {"r_bias": bias}
+
+    def from_coefficients(self, coefficients, base):
+        return {}
+
+    def evidence(self, context):
+        d = context.signals.r_measured - context.signals.heading_rate
+        t = float(np.mean(d) / (np.std(d) / np.sqrt(max(context.effective_samples, 1)) + 1e-12))
+        return Evidence(abs(t), f"the gyro's yaw rate and the heading's rate of change differ "
+                        f"by {np.degrees(np.mean(d)):+.3f} deg/s on average (t = {t:.1f})")
+
+
+class SpeedDependence(Effect):
+    name = "speed_dependence"
+    explanation = ("the boat steers differently at different speeds: the rudder is stronger and "
+                   "the hull answers faster when it goes faster")
+    needs_speed = True
+    parameters = (
+        Parameter("U_ref", "m/s", "reference speed at which K and T hold (fixed: median speed)",
+                  1.0, 0.0, np.inf),
+        Parameter("n_K", "-", "exponent of K in U/U_ref (1: K ~ U)", 1.0, -3.0, 4.0),
+        Parameter("n_T", "-", "exponent of the time constants in U_ref/U (1: T ~ 1/U)", 1.0, -3.0, 4.0),
+    )
+    fixed = ("U_ref",)
+
+    def speed_scales(self, speed, p):
+        ratio = np.maximum(speed, 0.05 * p["U_ref"]) / p["U_ref"]
+        return ratio ** p["n_K"], ratio ** (-p["n_T"])
+
+    def prepare(self, signals):
+        if signals.speed is None:
+            raise ValueError("speed_dependence needs a speed signal (a /usv/speed topic or a speed column)")
+        u_ref = float(np.median(signals.speed))
+        ratio = np.maximum(signals.speed, 0.05 * u_ref) / u_ref
+        signals.base_column_scales = {"K": ratio, "T": 1.0 / ratio}
+        return {"U_ref": u_ref}
+
+    def from_coefficients(self, coefficients, base):
+        return {"n_K": 1.0, "n_T": 1.0}
+
+    def evidence(self, context):
+        if context.signals.speed is None or np.std(context.signals.speed) < 1e-6:
+            return Evidence(0.0, "no speed variation in the data: speed dependence cannot be seen")
+        s = context.signals
+        feature = (s.speed - np.median(s.speed)) * s.delta
+        c = _partial_corr(context.equation_residual, feature, [s.delta])
+        return Evidence(abs(c) * np.sqrt(context.effective_samples),
+                        f"the error follows rudder times speed change (correlation {c:+.2f}): "
+                        "the rudder's effect changes with speed")
+
+
+EFFECTS: dict[str, Effect] = {}
+
+
+def register_effect(effect: Effect) -> Effect:
+    """Make an effect available by name to every front door (CLI, node, diagnosis)."""
+    if not effect.name:
+        raise ValueError("an effect needs a name")
+    EFFECTS[effect.name] = effect
+    return effect
+
+
+for _effect in (RudderOffset(), CubicYaw(), RudderDelay(), WindYaw(), GyroBias(), SpeedDependence()):
+    register_effect(_effect)

@@ -1,0 +1,35 @@
+"""Estimators by name: ``ols``, ``lssvm``, ``rlssvm``, ``rwlssvm``, ``tlssvm``, each optionally ``+oe``."""
+from __future__ import annotations
+
+from .base import Estimate, Estimator, RegressionEstimator, Solution
+from .lssvm import LSSVM, OLS, RLSSVM
+from .output_error import OutputError
+from .tlssvm import TLSSVM
+from .weighted import RWLSSVM
+
+ESTIMATORS = {cls.name: cls for cls in (OLS, LSSVM, RLSSVM, RWLSSVM, TLSSVM)}
+REFINEMENTS = ("oe",)
+DEFAULT_METHOD = "rwlssvm+oe"
+
+
+class MethodError(ValueError):
+    """An unknown estimator or refinement name."""
+
+
+def method_names() -> list[str]:
+    return [n for base in ESTIMATORS for n in (base, f"{base}+oe")]
+
+
+def make_estimator(method: str = DEFAULT_METHOD, **options) -> Estimator:
+    """Build an estimator from ``NAME`` or ``NAME+oe``; options go to the base estimator."""
+    base, _, refine = method.partition("+")
+    if base not in ESTIMATORS:
+        raise MethodError(f"unknown method {method!r}; choose from {', '.join(method_names())}")
+    if refine and refine not in REFINEMENTS:
+        raise MethodError(f"unknown refinement {refine!r} in {method!r}; use NAME+oe")
+    estimator = ESTIMATORS[base](**options)
+    return OutputError(estimator) if refine else estimator
+
+
+__all__ = ["Estimate", "Estimator", "RegressionEstimator", "Solution", "ESTIMATORS", "DEFAULT_METHOD",
+           "MethodError", "make_estimator", "method_names", "OutputError"]

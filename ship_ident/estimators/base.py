@@ -1,0 +1,158 @@
+"""The estimator interface and the Estimate it returns.
+
+Every estimator is an object with plain constructor parameters and one
+method, ``fit(structure, dataset) -> Estimate``. Regression estimators only
+implement ``solve(X, y)``; the shared ``RegressionEstimator.fit`` builds the
+regression, maps coefficients to physical parameters, propagates the
+coefficient covariance to standard errors (delta method, inflated for
+residual autocorrelation), judges excitation and runs the model free on the
+data for the fit figures.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..dataset import DataError, Dataset
+from ..metrics import effective_sample_fraction, free_run_fit
+from ..signals import Signals, compute_signals
+from ..structure import Regression, Structure
+
+MIN_RUDDER_STD = np.radians(1.0)   # rad: below this the rudder does not excite the hull
+MIN_YAW_RATE_STD = np.radians(0.3)  # rad/s
+
+
+@dataclass
+class Solution:
+    """Regression coefficients, their covariance (up to the noise variance) and solver facts."""
+
+    w: np.ndarray
+    cov: np.ndarray
+    info: dict = field(default_factory=dict)
+    residual: np.ndarray | None = None
+
+
+@dataclass
+class Estimate:
+    """Identified parameters with their standard errors, fit figures and flags."""
+
+    structure: Structure
+    method: str
+    parameters: dict
+    std_errors: dict
+    fit: dict
+    samples: int
+    flags: list = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+    window: tuple = (0.0, 0.0)
+
+    @property
+    def ok(self) -> bool:
+        return not any(f in self.flags for f in ("low_excitation", "diverged", "failed"))
+
+    def to_json(self) -> dict:
+        return {
+            "structure": self.structure.to_json(),
+            "method": self.method,
+            "parameters": {k: float(v) for k, v in self.parameters.items()},
+            "std_errors": {k: float(v) for k, v in self.std_errors.items()},
+            "fit": self.fit,
+            "samples": int(self.samples),
+            "window": {"start": float(self.window[0]), "end": float(self.window[1])},
+            "flags": list(self.flags),
+            "info": self.info,
+        }
+
+    def dumps(self) -> str:
+        return json.dumps(self.to_json(), allow_nan=True)
+
+
+def excitation(dataset: Dataset) -> dict:
+    """Rudder and yaw-rate activity of a dataset (rad, rad/s)."""
+    return {"rudder_std": float(np.std(dataset.rudder)),
+            "yaw_rate_std": float(np.std(dataset.yaw_rate))}
+
+
+def excitation_flags(dataset: Dataset) -> list[str]:
+    ex = excitation(dataset)
+    if ex["rudder_std"] < MIN_RUDDER_STD or ex["yaw_rate_std"] < MIN_YAW_RATE_STD:
+        return ["low_excitation"]
+    return []
+
+
+def finish_estimate(structure: Structure, dataset: Dataset, method: str, params: dict,
+                    std_errors: dict, flags: list, info: dict) -> Estimate:
+    """Add the in-sample free-run fit, excitation facts and flags."""
+    psi_sim, r_sim = structure.simulate(params, dataset)
+    fit = free_run_fit(dataset.heading, dataset.yaw_rate, psi_sim, r_sim)
+    flags = list(dict.fromkeys(flags + excitation_flags(dataset) + (["diverged"] if fit["diverged"] else [])))
+    info = dict(info, excitation=excitation(dataset))
+    return Estimate(structure=structure, method=method, parameters=params, std_errors=std_errors,
+                    fit=fit, samples=dataset.n_samples, flags=flags, info=info,
+                    window=(float(dataset.time[0]), float(dataset.time[-1])))
+
+
+class Estimator:
+    """Base class: fit a Structure to a Dataset."""
+
+    name = ""
+
+    def fit(self, structure: Structure, dataset: Dataset) -> Estimate:
+        raise NotImplementedError
+
+
+class RegressionEstimator(Estimator):
+    """An estimator that solves the equation-error regression ``y = X w``."""
+
+    def __init__(self, differentiation: str = "savgol"):
+        self.differentiation = differentiation
+
+    def solve(self, X: np.ndarray, y: np.ndarray) -> Solution:
+        raise NotImplementedError
+
+    def regression(self, structure: Structure, dataset: Dataset) -> Regression:
+        structure.check_data(dataset)
+        signals: Signals = compute_signals(dataset, self.differentiation)
+        regression = structure.regression(signals)
+        if regression.X.shape[0] <= regression.X.shape[1]:
+            raise DataError(f"{regression.X.shape[0]} usable samples for {regression.X.shape[1]} "
+                            "coefficients; record a longer window")
+        return regression
+
+    def fit(self, structure: Structure, dataset: Dataset) -> Estimate:
+        regression = self.regression(structure, dataset)
+        solution = self.solve(regression.X, regression.y)
+        params, flags = structure.parameters_from_coefficients(solution.w, regression)
+        residual = solution.residual if solution.residual is not None else \
+            regression.y - regression.X @ solution.w
+        dof = max(len(residual) - len(solution.w), 1)
+        sigma2 = float(residual @ residual / dof) / effective_sample_fraction(residual)
+        std = coefficient_std_errors(structure, regression, solution.w, sigma2 * solution.cov)
+        info = dict(solution.info, condition_number=float(np.linalg.cond(_scaled(regression.X))),
+                    residual_std=float(np.sqrt(sigma2)), columns=regression.columns)
+        return finish_estimate(structure, dataset, self.name, structure.clip_to_bounds(params),
+                               std, flags, info)
+
+
+def _scaled(X: np.ndarray) -> np.ndarray:
+    scale = np.sqrt(np.mean(X ** 2, axis=0))
+    return X / np.where(scale > 0, scale, 1.0)
+
+
+def coefficient_std_errors(structure: Structure, regression: Regression, w: np.ndarray,
+                           cov_w: np.ndarray) -> dict:
+    """Delta method: standard errors of the physical parameters from the coefficient covariance."""
+    names = structure.parameter_names
+    base, _ = structure.parameters_from_coefficients(w, regression)
+    J = np.zeros((len(names), len(w)))
+    for j in range(len(w)):
+        step = 1e-6 * max(abs(w[j]), 1e-6)
+        wp = w.copy()
+        wp[j] += step
+        shifted, _ = structure.parameters_from_coefficients(wp, regression)
+        J[:, j] = [(shifted[n] - base[n]) / step for n in names]
+    var = np.einsum("ij,jk,ik->i", J, cov_w, J)
+    return {n: float(np.sqrt(max(v, 0.0))) if np.isfinite(v) else float("inf")
+            for n, v in zip(names, var)}

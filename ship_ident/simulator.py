@@ -1,0 +1,196 @@
+"""USV steering simulator with known truth: manoeuvres, actuator, sensors.
+
+A manoeuvre is planned closed loop (zigzags switch on heading deviation)
+on a fine internal step; the rudder then passes a rate-limited, saturated
+actuator, and the vessel's true response is integrated by the same RK4
+kernel the estimators use, on the fine step (0.01 s, rudder piecewise
+linear between fine steps), before sampling at ``sample_time`` and adding
+sensor noise. Heading is output wrapped to (-pi, pi] as a compass gives it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .dataset import Dataset
+from .structure import Structure
+
+MANEUVERS = ("zigzag10", "zigzag20", "turning", "random", "mixed")
+
+
+@dataclass(frozen=True)
+class Vessel:
+    """A vessel preset: true parameters (SI) of nomoto2 and of every effect, speed and actuator."""
+
+    name: str
+    description: str
+    parameters: dict
+    seed_effects: tuple = ()     # effects the preset carries by default
+    speed: float = 2.0           # m/s, nominal
+    rudder_rate: float = np.radians(20.0)   # rad/s
+    rudder_limit: float = np.radians(35.0)  # rad
+
+
+_EFFECT_TRUTH = {
+    "delta_r": 0.0093, "alpha": -0.1239, "tau": 0.5,
+    "wind_c1": 0.012, "wind_s1": -0.008, "wind_c2": 0.004, "wind_s2": 0.0,
+    "r_bias": np.radians(0.5), "n_K": 1.0, "n_T": 1.0,
+}
+
+VESSELS = {
+    "seed001": Vessel(
+        "seed001", "seed 001 Table 1 simulation vessel (fast small USV)",
+        dict(_EFFECT_TRUTH, K=0.5883, T1=1.4397, T2=0.1202, T3=0.0440, T=1.4397 + 0.1202 - 0.0440),
+        seed_effects=("rudder_offset", "cubic_yaw"), speed=2.0),
+    "usv75": Vessel(
+        "usv75", "typical 7.5 m USV (seed 001 Tables 5-6: Lpp 7.5 m, 2.97 t)",
+        dict(_EFFECT_TRUTH, K=0.35, T1=4.30, T2=0.40, T3=0.20, T=4.30 + 0.40 - 0.20,
+             alpha=2.0, delta_r=0.012),
+        seed_effects=("rudder_offset", "cubic_yaw"), speed=3.0, rudder_rate=np.radians(15.0)),
+}
+
+
+@dataclass(frozen=True)
+class Noise:
+    """Sensor noise standard deviations (SI): the realistic levels of the identification benchmarks."""
+
+    rudder: float = np.radians(0.1)
+    heading: float = np.radians(0.1)
+    yaw_rate: float = np.radians(0.2)
+    speed: float = 0.02
+
+    def scaled(self, factor: float) -> "Noise":
+        return Noise(self.rudder * factor, self.heading * factor, self.yaw_rate * factor,
+                     self.speed * factor)
+
+
+@dataclass
+class Simulation:
+    """Simulated measurements, the noise-free truth and the parameters behind them."""
+
+    dataset: Dataset
+    truth: dict
+    structure: Structure
+    true_heading: np.ndarray
+    true_yaw_rate: np.ndarray
+    true_rudder: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    def truth_json(self) -> dict:
+        return {"structure": self.structure.to_json(),
+                "parameters": {k: self.truth[k] for k in self.structure.parameter_names},
+                **self.info}
+
+
+def _plan_commands(maneuver: str, vessel: Vessel, duration: float, dt: float,
+                   rng: np.random.Generator, amplitude: float | None) -> np.ndarray:
+    """Rudder command (rad) on the fine grid, planned on a first-order model of the vessel."""
+    p = vessel.parameters
+    k_gain, t_eff = p["K"], max(p["T1"] + p["T2"] - p["T3"], 0.1)
+    n = int(round(duration / dt)) + 1
+    if maneuver == "mixed":
+        parts = [("zigzag10", 0.25), ("zigzag20", 0.25), ("turning", 0.25), ("random", 0.25)]
+        out = [_plan_commands(m, vessel, duration * f, dt, rng, None) for m, f in parts]
+        cmd = np.concatenate(out)
+        return np.resize(cmd, n) if len(cmd) != n else cmd
+    cmd = np.zeros(n)
+    if maneuver.startswith("zigzag"):
+        amp = np.radians(float(maneuver[6:])) if amplitude is None else amplitude
+        psi = r = 0.0
+        side = 1.0
+        for i in range(n):
+            if side > 0 and psi >= amp:
+                side = -1.0
+            elif side < 0 and psi <= -amp:
+                side = 1.0
+            cmd[i] = side * amp
+            r += dt * (k_gain * cmd[i] - r) / t_eff
+            psi += dt * r
+    elif maneuver == "turning":
+        amp = np.radians(20.0) if amplitude is None else amplitude
+        t = np.arange(n) * dt
+        period = duration / 2
+        phase = np.mod(t, period) / period
+        sign = np.where(t < period, 1.0, -1.0)
+        cmd = np.where((phase > 0.05) & (phase < 0.8), sign * amp, 0.0)
+    elif maneuver == "random":
+        amp = np.radians(25.0) if amplitude is None else amplitude
+        i = 0
+        while i < n:
+            hold = int(rng.uniform(2.0, 12.0) / dt)
+            cmd[i:i + hold] = rng.uniform(-amp, amp)
+            i += hold
+    else:
+        raise ValueError(f"unknown maneuver {maneuver!r}; choose from {', '.join(MANEUVERS)}")
+    return cmd
+
+
+def _actuator(cmd: np.ndarray, dt: float, rate: float, limit: float) -> np.ndarray:
+    """Rate-limited, saturated steering gear: the rudder follows the command."""
+    out = np.empty_like(cmd)
+    x = 0.0
+    step = rate * dt
+    for i, c in enumerate(np.clip(cmd, -limit, limit)):
+        x += min(max(c - x, -step), step)
+        out[i] = x
+    return out
+
+
+def speed_profile(time: np.ndarray, nominal: float, varying: bool) -> np.ndarray:
+    """Forward speed (m/s): constant, or stepping between 60 % and 120 % of nominal when varying."""
+    if not varying:
+        return np.full(len(time), nominal)
+    levels = nominal * np.array([1.0, 0.6, 1.2, 0.8])
+    index = (time // 150.0).astype(int) % len(levels)
+    return levels[index]
+
+
+def simulate(maneuver: str = "mixed", vessel: str | Vessel = "seed001", effects=None,
+             duration: float = 600.0, sample_time: float = 0.1, noise: float | Noise = 1.0,
+             seed: int = 0, parameters: dict | None = None, amplitude: float | None = None,
+             fine_step: float = 0.01, model: str = "nomoto2") -> Simulation:
+    """Simulate a manoeuvre and return noisy measurements with their truth.
+
+    ``effects`` defaults to the vessel's own (``seed001``: rudder offset and
+    cubic yaw damping); ``parameters`` overrides true values; ``noise`` is a
+    multiple of the realistic sensor noise or a ``Noise``.
+    """
+    vessel = VESSELS[vessel] if isinstance(vessel, str) else vessel
+    effects = vessel.seed_effects if effects is None else tuple(effects)
+    structure = Structure(model, effects)
+    truth = dict(vessel.parameters)
+    truth.update(parameters or {})
+    if "speed_dependence" in effects:
+        truth["U_ref"] = vessel.speed
+    rng = np.random.default_rng(seed)
+    cmd = _plan_commands(maneuver, vessel, duration, fine_step, rng, amplitude)
+    stride = int(round(sample_time / fine_step))
+    t_fine = np.arange(len(cmd)) * fine_step
+    commanded = _actuator(cmd[::stride], sample_time, vessel.rudder_rate, vessel.rudder_limit)
+    rudder_fine = np.interp(t_fine, t_fine[::stride], commanded)
+    speed_fine = speed_profile(t_fine, vessel.speed, "speed_dependence" in effects)
+    zeros = np.zeros(len(t_fine))
+    fine = Dataset(time=t_fine, rudder=rudder_fine, heading=zeros, yaw_rate=zeros, speed=speed_fine,
+                   meta={"sample_time": fine_step})
+    psi_fine, r_meas_fine = structure.simulate(truth, fine, initial=[(0.0, 0.0, 0.0)], substeps=2)
+    r_fine = r_meas_fine - structure.measured_yaw_rate(np.zeros(1), truth)[0]
+    idx = np.arange(0, len(t_fine), stride)
+    noise = Noise().scaled(noise) if not isinstance(noise, Noise) else noise
+    n = len(idx)
+    rudder = rudder_fine[idx] + noise.rudder * rng.standard_normal(n)
+    heading = psi_fine[idx] + noise.heading * rng.standard_normal(n)
+    heading = np.mod(heading + np.pi, 2 * np.pi) - np.pi
+    heading[heading == -np.pi] = np.pi
+    yaw_rate = r_meas_fine[idx] + noise.yaw_rate * rng.standard_normal(n)
+    speed = speed_fine[idx] + noise.speed * rng.standard_normal(n)
+    dataset = Dataset(time=t_fine[idx], rudder=rudder, heading=np.unwrap(heading), yaw_rate=yaw_rate,
+                      speed=speed, meta={"sample_time": sample_time, "source": f"simulate:{maneuver}",
+                                         "wrapped_heading": heading})
+    info = {"maneuver": maneuver, "vessel": vessel.name, "sample_time": sample_time,
+            "duration": float(t_fine[idx][-1]), "seed": seed,
+            "noise": {"rudder": noise.rudder, "heading": noise.heading,
+                      "yaw_rate": noise.yaw_rate, "speed": noise.speed}}
+    return Simulation(dataset=dataset, truth={k: truth[k] for k in structure.parameter_names},
+                      structure=structure, true_heading=psi_fine[idx], true_yaw_rate=r_fine[idx],
+                      true_rudder=rudder_fine[idx], info=info)

@@ -1,0 +1,225 @@
+"""Model structure: a Nomoto base model plus effects.
+
+The structure knows the parameters (names, units, physical bounds), how to
+simulate the model free from measured rudder (``simulate``) and how to
+write the ODE as an equation-error regression ``r = X w`` and map ``w``
+back to physical parameters in closed form.
+
+Regression (continuous time, on smoothed derivatives, see signals.py):
+
+    nomoto1:  r = -T r' + K d + (effect columns)
+    nomoto2:  r = -T1 T2 r'' - (T1 + T2) r' + K d + K T3 d' + (effect columns)
+
+so w = [-T1 T2, -(T1 + T2), K, K T3, ...] and T1, T2 are the roots of
+x^2 - (T1 + T2) x + T1 T2 = 0 (T1 >= T2).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .dataset import DataError, Dataset
+from .effects import EFFECTS, Effect, Parameter
+from .integrate import simulate_kernel, substeps_for
+
+BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
+    "nomoto1": (
+        Parameter("K", "1/s", "rudder gain: steady yaw rate per rudder angle", 0.5, 1e-6, 100.0),
+        Parameter("T", "s", "yaw time constant", 5.0, 1e-3, 1e3),
+    ),
+    "nomoto2": (
+        Parameter("K", "1/s", "rudder gain: steady yaw rate per rudder angle", 0.5, 1e-6, 100.0),
+        Parameter("T1", "s", "slow yaw time constant", 5.0, 1e-3, 1e3),
+        Parameter("T2", "s", "fast yaw time constant", 0.5, 1e-3, 1e3),
+        Parameter("T3", "s", "rudder lead time constant", 0.1, 0.0, 1e3),
+    ),
+}
+
+
+class StructureError(ValueError):
+    """An unknown model or effect name, or an effect that the data cannot support."""
+
+
+@dataclass
+class Regression:
+    """Equation-error regression ``y = X w`` with named columns on the usable rows."""
+
+    X: np.ndarray
+    y: np.ndarray
+    columns: list[str]
+    fixed: dict   # parameters found before the regression (e.g. gyro bias, reference speed)
+    signals: object
+
+
+class Structure:
+    """A base model (``nomoto1``/``nomoto2``) and a list of effects."""
+
+    def __init__(self, model: str = "nomoto2", effects=()):
+        if model not in BASE_MODELS:
+            raise StructureError(f"unknown model {model!r}; choose from {', '.join(BASE_MODELS)}")
+        effects = [e.strip() for e in effects if e.strip()] if not isinstance(effects, str) else \
+            [e.strip() for e in effects.split(",") if e.strip()]
+        unknown = [e for e in effects if e not in EFFECTS]
+        if unknown:
+            raise StructureError(f"unknown effect {unknown[0]!r}; choose from {', '.join(EFFECTS)}")
+        if len(set(effects)) != len(effects):
+            raise StructureError(f"effect listed twice: {effects}")
+        self.model = model
+        self.effect_names = tuple(effects)
+        self.effects: tuple[Effect, ...] = tuple(EFFECTS[e] for e in effects)
+        self.parameters: tuple[Parameter, ...] = BASE_MODELS[model] + tuple(
+            p for e in self.effects for p in e.parameters)
+        self.parameter_names = [p.name for p in self.parameters]
+        self.fixed_names = [n for e in self.effects for n in getattr(e, "fixed", ())]
+        self.free_names = [n for n in self.parameter_names if n not in self.fixed_names]
+
+    @property
+    def order(self) -> int:
+        return 1 if self.model == "nomoto1" else 2
+
+    @property
+    def needs_speed(self) -> bool:
+        return any(e.needs_speed for e in self.effects)
+
+    def with_effects(self, effects) -> "Structure":
+        return Structure(self.model, list(effects))
+
+    def label(self) -> str:
+        return "+".join((self.model,) + self.effect_names)
+
+    def to_json(self) -> dict:
+        return {"model": self.model, "effects": list(self.effect_names)}
+
+    def parameter(self, name: str) -> Parameter:
+        return next(p for p in self.parameters if p.name == name)
+
+    def initial_parameters(self) -> dict:
+        return {p.name: p.initial for p in self.parameters}
+
+    def bounds(self, names=None) -> tuple[np.ndarray, np.ndarray]:
+        names = self.free_names if names is None else names
+        return (np.array([self.parameter(n).lower for n in names]),
+                np.array([self.parameter(n).upper for n in names]))
+
+    def check_data(self, dataset: Dataset) -> None:
+        if self.needs_speed and dataset.speed is None:
+            raise StructureError("speed_dependence needs a speed signal; record /usv/speed or "
+                                 "add a speed column")
+
+    # --- simulation -------------------------------------------------------
+    def simulate(self, params: dict, dataset: Dataset, initial: list | None = None,
+                 substeps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Free-run heading (rad) and measured yaw rate (rad/s) from the measured rudder.
+
+        Each segment starts from ``initial[i] = (psi0, r0, rdot0)`` (true
+        hull states) or, by default, from the measured heading and yaw rate at
+        its first sample with r' = 0.
+        """
+        self.check_data(dataset)
+        psi_out = np.full(dataset.n_samples, np.nan)
+        r_out = np.full(dataset.n_samples, np.nan)
+        h = dataset.sample_time
+        time_constants = [params["T"]] if self.order == 1 else [params["T1"], params["T2"]]
+        substeps = substeps or substeps_for(h, min(time_constants))
+        rudder = dataset.rudder
+        for effect in self.effects:
+            rudder = effect.effective_rudder(dataset.time, rudder, params)
+        gain = np.ones(dataset.n_samples)
+        tscale = np.ones(dataset.n_samples)
+        for effect in self.effects:
+            scales = effect.speed_scales(dataset.speed, params) if dataset.speed is not None else None
+            if scales is not None:
+                gain, tscale = gain * scales[0], tscale * scales[1]
+        terms = [t for e in self.effects for t in e.forcing_terms(params)]
+        coef = np.array([t.coefficient for t in terms], dtype=float)
+        ints = [np.array([getattr(t, f) for t in terms], dtype=np.int64)
+                for f in ("r_power", "abs_power", "harmonic", "trig")]
+        K = params["K"]
+        T1 = params["T"] if self.order == 1 else params["T1"]
+        T2 = 0.0 if self.order == 1 else params["T2"]
+        T3 = 0.0 if self.order == 1 else params["T3"]
+        bias = self.measured_yaw_rate(np.zeros(1), params)[0]
+        for i, (a, b) in enumerate(dataset.segments):
+            if initial is not None:
+                psi0, r0, rdot0 = initial[i]
+            else:
+                psi0, r0, rdot0 = dataset.heading[a], dataset.yaw_rate[a] - bias, 0.0
+            psi, r = simulate_kernel(self.order, h, np.ascontiguousarray(rudder[a:b]),
+                                     np.ascontiguousarray(gain[a:b]), np.ascontiguousarray(tscale[a:b]),
+                                     K, T1, T2, T3, psi0, r0, rdot0, coef, *ints, substeps)
+            psi_out[a:b], r_out[a:b] = psi, r
+        return psi_out, self.measured_yaw_rate(r_out, params)
+
+    def measured_yaw_rate(self, r: np.ndarray, params: dict) -> np.ndarray:
+        for effect in self.effects:
+            r = effect.measured_yaw_rate(r, params)
+        return r
+
+    # --- regression -------------------------------------------------------
+    def regression(self, signals) -> Regression:
+        """Build ``r = X w`` on the usable rows; effects may fix parameters first."""
+        fixed = {}
+        for effect in self.effects:
+            fixed.update(effect.prepare(signals))
+        s = signals
+        scale_k = s.base_column_scales.get("K", 1.0)
+        scale_t = s.base_column_scales.get("T", 1.0)
+        if self.order == 1:
+            cols = {"r'": s.r_dot * scale_t, "delta": s.delta * scale_k}
+        else:
+            cols = {"r''": s.r_ddot * scale_t ** 2, "r'": s.r_dot * scale_t,
+                    "delta": s.delta * scale_k, "delta'": s.delta_dot}
+        for effect in self.effects:
+            cols.update(effect.regressors(s))
+        rows = s.rows
+        X = np.column_stack([np.broadcast_to(c, s.r.shape)[rows] for c in cols.values()])
+        return Regression(X=X, y=s.r[rows], columns=list(cols), fixed=fixed, signals=s)
+
+    def parameters_from_coefficients(self, w: np.ndarray, regression: Regression) -> tuple[dict, list[str]]:
+        """Closed-form map from regression coefficients to physical parameters, with flags."""
+        c = dict(zip(regression.columns, w))
+        flags = []
+        base = {"K": c["delta"]}
+        if self.order == 1:
+            base["T"] = -c["r'"]
+        else:
+            total, product = -c["r'"], -c["r''"]
+            disc = total * total - 4 * product
+            if disc < 0:
+                flags.append("complex_time_constants")
+                base["T1"] = base["T2"] = total / 2
+            else:
+                base["T1"] = (total + np.sqrt(disc)) / 2
+                base["T2"] = (total - np.sqrt(disc)) / 2
+            base["T3"] = c["delta'"] / c["delta"] if c["delta"] != 0 else 0.0
+        params = dict(base)
+        for effect in self.effects:
+            params.update(effect.from_coefficients(c, base))
+        params.update(regression.fixed)
+        for p in self.parameters:
+            if not p.lower <= params[p.name] <= p.upper:
+                flags.append(f"{p.name}_out_of_bounds")
+        return params, flags
+
+    def clip_to_bounds(self, params: dict) -> dict:
+        """Parameters moved just inside their physical bounds (K > 0, T > 0, T3 >= 0, ...)."""
+        out = dict(params)
+        for p in self.parameters:
+            v = out[p.name]
+            if not np.isfinite(v):
+                v = p.initial
+            span = 1e-6 * max(1.0, abs(v))
+            lo = p.lower + (span if np.isfinite(p.lower) and p.lower > 0 else 0.0)
+            out[p.name] = float(np.clip(v, lo, p.upper))
+        return out
+
+
+def parse_effects(text: str | None) -> list[str]:
+    """Effect names from a comma-separated string ("" or None: no effects)."""
+    return [e.strip() for e in (text or "").split(",") if e.strip()]
+
+
+def require_samples(dataset: Dataset, minimum: int = 20) -> None:
+    if dataset.n_samples < minimum:
+        raise DataError(f"only {dataset.n_samples} samples; need at least {minimum}")

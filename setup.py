@@ -22,7 +22,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
-        (f"share/{PACKAGE}/bags", glob("bags/*.mcap")),
+        (f"share/{PACKAGE}/bags", glob("bags/*.mcap") + glob("bags/*.json")),
     ],
     python_requires=">=3.10",
     install_requires=[

@@ -8,15 +8,17 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+
+# The fits solve small systems (a few columns): a BLAS thread pool only costs CPU.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from .errors import CommandError
 
 COMMANDS = ("simulate", "identify", "compare", "replay", "play", "diagnose", "bench")
 
 EXIT_USAGE = 2
-
-
-class CommandError(Exception):
-    """A user-facing failure: printed as one line, exit code 2."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,10 +51,15 @@ def main(argv=None) -> int:
             PermissionError, IsADirectoryError, ValueError) as exc:
         print(f"ship-ident {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:
+        sys.stderr.close()  # the reader went away (e.g. `| head`): nothing more to say
+        return 0
     except KeyboardInterrupt:
         print(f"ship-ident {args.command}: interrupted", file=sys.stderr)
         return 130
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from ship_ident.cli import main as installed_main  # one module object, so errors match
+
+    sys.exit(installed_main())

@@ -50,10 +50,20 @@ class ForcingTerm:
 
 @dataclass
 class Evidence:
-    """How strongly the residual points to an effect: a score (larger: stronger) and a sentence."""
+    """How strongly the residual points to an effect: a score (larger: stronger) and a sentence.
+
+    ``feature`` is what the residual was tested against (for the report's
+    residual-versus-feature plot), ``feature_label`` names it with the unit
+    shown, ``feature_scale`` turns SI into that unit, and ``residual`` is the
+    residual tested when it is not the context's equation residual.
+    """
 
     score: float
     sentence: str
+    feature: np.ndarray | None = None
+    feature_label: str = ""
+    feature_scale: float = 1.0
+    residual: np.ndarray | None = None
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
@@ -139,7 +149,8 @@ class RudderOffset(Effect):
         t = float(np.mean(e) / (np.std(e) / np.sqrt(max(context.effective_samples, 1)) + 1e-12))
         side = "starboard" if np.mean(e) > 0 else "port"
         return Evidence(abs(t), f"the model's yaw-rate error has a steady bias to {side} "
-                        f"(t = {t:.1f}): a constant turning moment the rudder does not explain")
+                        f"(t = {t:.1f}): a constant turning moment the rudder does not explain",
+                        context.signals.delta, "rudder (deg)", np.degrees(1.0))
 
 
 class CubicYaw(Effect):
@@ -161,7 +172,8 @@ class CubicYaw(Effect):
         c = _partial_corr(context.equation_residual, context.signals.r ** 3, [context.signals.r])
         return Evidence(abs(c) * np.sqrt(context.effective_samples),
                         f"the error grows with the turn rate cubed (correlation {c:+.2f}): "
-                        "damping is not linear in tight turns")
+                        "damping is not linear in tight turns",
+                        context.signals.r, "yaw rate (deg/s)", np.degrees(1.0))
 
 
 class RudderDelay(Effect):
@@ -181,7 +193,8 @@ class RudderDelay(Effect):
             note = "; T3 is pinned at its bound 0, which is what a delay looks like"
         return Evidence(max(c, 0.0) * np.sqrt(context.effective_samples),
                         f"the error follows the rudder rate with the sign of a lag "
-                        f"(correlation {c:+.2f}){note}: the hull answers later than the sensor says")
+                        f"(correlation {c:+.2f}){note}: the hull answers later than the sensor says",
+                        context.signals.delta_dot, "rudder rate (deg/s)", np.degrees(1.0))
 
 
 class WindYaw(Effect):
@@ -215,7 +228,8 @@ class WindYaw(Effect):
         spread = np.ptp(np.mod(psi, 2 * np.pi)) if len(psi) else 0.0
         return Evidence(r2 * np.sqrt(context.effective_samples) * min(1.0, spread / np.pi),
                         f"the error depends on the heading ({100 * r2:.0f} % of it explained by "
-                        "heading harmonics): a steady wind or current pushes the bow")
+                        "heading harmonics): a steady wind or current pushes the bow",
+                        np.mod(psi, 2 * np.pi), "heading (deg)", np.degrees(1.0))
 
 
 class GyroBias(Effect):
@@ -240,7 +254,8 @@ class GyroBias(Effect):
         d = context.signals.r_measured - context.signals.heading_rate
         t = float(np.mean(d) / (np.std(d) / np.sqrt(max(context.effective_samples, 1)) + 1e-12))
         return Evidence(abs(t), f"the gyro's yaw rate and the heading's rate of change differ "
-                        f"by {np.degrees(np.mean(d)):+.3f} deg/s on average (t = {t:.1f})")
+                        f"by {np.degrees(np.mean(d)):+.3f} deg/s on average (t = {t:.1f})",
+                        context.signals.r, "yaw rate (deg/s)", np.degrees(1.0), residual=d)
 
 
 class SpeedDependence(Effect):
@@ -279,7 +294,8 @@ class SpeedDependence(Effect):
         c = _partial_corr(context.equation_residual, feature, [s.delta])
         return Evidence(abs(c) * np.sqrt(context.effective_samples),
                         f"the error follows rudder times speed change (correlation {c:+.2f}): "
-                        "the rudder's effect changes with speed")
+                        "the rudder's effect changes with speed",
+                        feature, "rudder x speed change (rad m/s)")
 
 
 EFFECTS: dict[str, Effect] = {}

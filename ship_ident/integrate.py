@@ -29,10 +29,10 @@ def _forcing(psi, r, coef, r_power, abs_power, harmonic, trig):
     total = 0.0
     for j in range(coef.shape[0]):
         v = coef[j]
-        if r_power[j] != 0:
-            v *= r ** r_power[j]
-        if abs_power[j] != 0:
-            v *= abs(r) ** abs_power[j]
+        for _ in range(r_power[j]):  # repeated products: far cheaper than pow in the inner loop
+            v *= r
+        for _ in range(abs_power[j]):
+            v *= abs(r)
         if trig[j] == 1:
             v *= np.cos(harmonic[j] * psi)
         elif trig[j] == 2:
@@ -51,6 +51,33 @@ def _rhs(order, psi, r, z, d, K, T1, T2, T3, coef, r_power, abs_power, harmonic,
 
 
 @njit(cache=True)
+def advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, coef, r_power, abs_power, harmonic, trig, substeps):
+    """Advance the state (psi, r, z) over one sample of length h, rudder linear from d0 to d1."""
+    dt = h / substeps
+    for s in range(substeps):
+        da = d0 + (s / substeps) * (d1 - d0)
+        db = d0 + ((s + 0.5) / substeps) * (d1 - d0)
+        dc = d0 + ((s + 1.0) / substeps) * (d1 - d0)
+        k1p, k1r, k1z = _rhs(order, psi, r, z, da, K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
+        k2p, k2r, k2z = _rhs(order, psi + 0.5 * dt * k1p, r + 0.5 * dt * k1r, z + 0.5 * dt * k1z, db,
+                             K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
+        k3p, k3r, k3z = _rhs(order, psi + 0.5 * dt * k2p, r + 0.5 * dt * k2r, z + 0.5 * dt * k2z, db,
+                             K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
+        k4p, k4r, k4z = _rhs(order, psi + dt * k3p, r + dt * k3r, z + dt * k3z, dc,
+                             K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
+        psi += dt * (k1p + 2 * k2p + 2 * k3p + k4p) / 6.0
+        r += dt * (k1r + 2 * k2r + 2 * k3r + k4r) / 6.0
+        z += dt * (k1z + 2 * k2z + 2 * k3z + k4z) / 6.0
+    return psi, r, z
+
+
+@njit(cache=True)
+def initial_z(K, T1, T2, T3, r, rdot, rudder):
+    """The nomoto2 auxiliary state z = T1 T2 r' + (T1 + T2) r - K T3 d (unused by nomoto1)."""
+    return T1 * T2 * rdot + (T1 + T2) * r - K * T3 * rudder
+
+
+@njit(cache=True)
 def simulate_kernel(order, h, rudder, gain_scale, time_scale, K0, T10, T20, T30,
                     psi0, r0, rdot0, coef, r_power, abs_power, harmonic, trig, substeps):
     """Integrate from sample 0 with RK4, ``substeps`` steps per sample.
@@ -63,30 +90,13 @@ def simulate_kernel(order, h, rudder, gain_scale, time_scale, K0, T10, T20, T30,
     r_out = np.empty(n)
     psi, r = psi0, r0
     K, T1, T2, T3 = K0 * gain_scale[0], T10 * time_scale[0], T20 * time_scale[0], T30 * time_scale[0]
-    z = T1 * T2 * rdot0 + (T1 + T2) * r - K * T3 * rudder[0]
+    z = initial_z(K, T1, T2, T3, r, rdot0, rudder[0])
     psi_out[0], r_out[0] = psi, r
-    dt = h / substeps
     for k in range(n - 1):
         K = K0 * gain_scale[k]
         T1, T2, T3 = T10 * time_scale[k], T20 * time_scale[k], T30 * time_scale[k]
-        d0, d1 = rudder[k], rudder[k + 1]
-        for s in range(substeps):
-            a = s / substeps
-            b = (s + 0.5) / substeps
-            c = (s + 1.0) / substeps
-            da = d0 + a * (d1 - d0)
-            db = d0 + b * (d1 - d0)
-            dc = d0 + c * (d1 - d0)
-            k1p, k1r, k1z = _rhs(order, psi, r, z, da, K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
-            k2p, k2r, k2z = _rhs(order, psi + 0.5 * dt * k1p, r + 0.5 * dt * k1r, z + 0.5 * dt * k1z, db,
-                                 K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
-            k3p, k3r, k3z = _rhs(order, psi + 0.5 * dt * k2p, r + 0.5 * dt * k2r, z + 0.5 * dt * k2z, db,
-                                 K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
-            k4p, k4r, k4z = _rhs(order, psi + dt * k3p, r + dt * k3r, z + dt * k3z, dc,
-                                 K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
-            psi += dt * (k1p + 2 * k2p + 2 * k3p + k4p) / 6.0
-            r += dt * (k1r + 2 * k2r + 2 * k3r + k4r) / 6.0
-            z += dt * (k1z + 2 * k2z + 2 * k3z + k4z) / 6.0
+        psi, r, z = advance(order, h, rudder[k], rudder[k + 1], K, T1, T2, T3, psi, r, z,
+                            coef, r_power, abs_power, harmonic, trig, substeps)
         if not (np.isfinite(psi) and np.isfinite(r)) or abs(r) > 1e3:
             for m in range(k + 1, n):
                 psi_out[m] = np.nan
@@ -97,5 +107,6 @@ def simulate_kernel(order, h, rudder, gain_scale, time_scale, K0, T10, T20, T30,
 
 
 def substeps_for(h: float, fastest_time_constant: float) -> int:
-    """RK4 substeps per sample so that the step is at most a fifth of the fastest time constant."""
-    return int(min(200, max(1, np.ceil(5.0 * h / max(fastest_time_constant, 1e-3)))))
+    """RK4 substeps per sample: a step of at most half the fastest time constant (RK4 is
+    stable to 2.8 and its error on that mode is below 1e-3 there), at most 200."""
+    return int(min(200, max(1, np.ceil(2.0 * h / max(fastest_time_constant, 1e-3)))))

@@ -149,12 +149,16 @@ def speed_profile(time: np.ndarray, nominal: float, varying: bool) -> np.ndarray
 def simulate(maneuver: str = "mixed", vessel: str | Vessel = "seed001", effects=None,
              duration: float = 600.0, sample_time: float = 0.1, noise: float | Noise = 1.0,
              seed: int = 0, parameters: dict | None = None, amplitude: float | None = None,
-             fine_step: float = 0.01, model: str = "nomoto2") -> Simulation:
+             fine_step: float = 0.01, model: str = "nomoto2",
+             change: tuple[float, dict] | None = None) -> Simulation:
     """Simulate a manoeuvre and return noisy measurements with their truth.
 
     ``effects`` defaults to the vessel's own (``seed001``: rudder offset and
     cubic yaw damping); ``parameters`` overrides true values; ``noise`` is a
-    multiple of the realistic sensor noise or a ``Noise``.
+    multiple of the realistic sensor noise or a ``Noise``. ``change =
+    (time_s, values)`` changes true parameters at that time (a vessel loaded
+    mid-trip); the motion stays continuous and ``info['truth_after']`` holds
+    the new values.
     """
     vessel = VESSELS[vessel] if isinstance(vessel, str) else vessel
     effects = vessel.seed_effects if effects is None else tuple(effects)
@@ -175,6 +179,14 @@ def simulate(maneuver: str = "mixed", vessel: str | Vessel = "seed001", effects=
                    meta={"sample_time": fine_step})
     psi_fine, r_meas_fine = structure.simulate(truth, fine, initial=[(0.0, 0.0, 0.0)], substeps=2)
     r_fine = r_meas_fine - structure.measured_yaw_rate(np.zeros(1), truth)[0]
+    truth_after = None
+    if change is not None:
+        i = int(round(change[0] / fine_step))
+        truth_after = dict(truth, **change[1])
+        state = (psi_fine[i], r_fine[i], (r_fine[i] - r_fine[i - 1]) / fine_step)
+        psi_fine[i:], r_meas_fine[i:] = structure.simulate(truth_after, fine.slice(i, len(t_fine)),
+                                                           initial=[state], substeps=2)
+        r_fine[i:] = r_meas_fine[i:] - structure.measured_yaw_rate(np.zeros(1), truth_after)[0]
     idx = np.arange(0, len(t_fine), stride)
     noise = Noise().scaled(noise) if not isinstance(noise, Noise) else noise
     n = len(idx)
@@ -191,6 +203,9 @@ def simulate(maneuver: str = "mixed", vessel: str | Vessel = "seed001", effects=
             "duration": float(t_fine[idx][-1]), "seed": seed,
             "noise": {"rudder": noise.rudder, "heading": noise.heading,
                       "yaw_rate": noise.yaw_rate, "speed": noise.speed}}
+    if truth_after is not None:
+        info["change_time"] = float(change[0])
+        info["truth_after"] = {k: truth_after[k] for k in structure.parameter_names}
     return Simulation(dataset=dataset, truth={k: truth[k] for k in structure.parameter_names},
                       structure=structure, true_heading=psi_fine[idx], true_yaw_rate=r_fine[idx],
                       true_rudder=rudder_fine[idx], info=info)

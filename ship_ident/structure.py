@@ -26,12 +26,12 @@ from .integrate import simulate_kernel, substeps_for
 BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
     "nomoto1": (
         Parameter("K", "1/s", "rudder gain: steady yaw rate per rudder angle", 0.5, 1e-6, 100.0),
-        Parameter("T", "s", "yaw time constant", 5.0, 1e-3, 1e3),
+        Parameter("T", "s", "yaw time constant", 5.0, 0.01, 1e3),
     ),
     "nomoto2": (
         Parameter("K", "1/s", "rudder gain: steady yaw rate per rudder angle", 0.5, 1e-6, 100.0),
-        Parameter("T1", "s", "slow yaw time constant", 5.0, 1e-3, 1e3),
-        Parameter("T2", "s", "fast yaw time constant", 0.5, 1e-3, 1e3),
+        Parameter("T1", "s", "slow yaw time constant", 5.0, 0.01, 1e3),
+        Parameter("T2", "s", "fast yaw time constant (no hull answers faster than 10 ms)", 0.5, 0.01, 1e3),
         Parameter("T3", "s", "rudder lead time constant", 0.1, 0.0, 1e3),
     ),
 }

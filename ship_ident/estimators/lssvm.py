@@ -28,7 +28,7 @@ import numpy as np
 
 from .base import RegressionEstimator, Solution
 
-DUAL_MAX_SAMPLES = 3000  # the N x N dual is solved up to this size; beyond, its exact primal twin
+DUAL_MAX_SAMPLES = 1500  # the N x N dual (O(N^3)) is solved up to this size; beyond, its exact primal twin
 
 
 def column_scales(X: np.ndarray) -> np.ndarray:
@@ -105,6 +105,8 @@ class LSSVM(RegressionEstimator):
         else:
             w, b = lssvm_primal_with_bias(X, y, self.gamma)
             solver = "primal-equivalent"
+        constant = np.all(X == X[:1], axis=0)
+        w[constant] = 0.0  # sum(a) = 0 makes them zero; remove the round-off (~1e-13)
         Xc = X - X.mean(axis=0)
         cov = np.linalg.pinv(Xc.T @ Xc + np.eye(X.shape[1]) / self.gamma)
         return Solution(w=w, cov=cov, info={"gamma": self.gamma, "bias": b, "solver": solver},

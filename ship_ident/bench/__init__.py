@@ -1,0 +1,43 @@
+"""Benchmarks of the identification engine, run by ``ship-ident bench NAME``.
+
+A benchmark is a module in this package that calls ``register`` at import
+with its name, a one-line description, ``run(quick: bool) -> dict`` (a
+JSON-ready result; progress goes to stderr) and ``render(result) -> str``
+(the printed tables). ``benchmarks()`` imports every module here, so adding
+a benchmark means adding one module and nothing else.
+"""
+from __future__ import annotations
+
+import importlib
+import pkgutil
+import sys
+from dataclasses import dataclass
+from typing import Callable
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    name: str
+    description: str
+    run: Callable[[bool], dict]
+    render: Callable[[dict], str]
+
+
+_REGISTRY: dict[str, Benchmark] = {}
+HELPERS = {"crb", "common"}  # modules here that are no benchmark
+
+
+def register(name: str, description: str, run: Callable[[bool], dict], render: Callable[[dict], str]) -> None:
+    _REGISTRY[name] = Benchmark(name, description, run, render)
+
+
+def benchmarks() -> dict[str, Benchmark]:
+    """All registered benchmarks by name (imports every benchmark module of the package)."""
+    for module in pkgutil.iter_modules(__path__):
+        if module.name not in HELPERS:
+            importlib.import_module(f"{__name__}.{module.name}")
+    return dict(sorted(_REGISTRY.items()))
+
+
+def progress(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)

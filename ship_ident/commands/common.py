@@ -1,0 +1,75 @@
+"""Argument helpers shared by the subcommands: data input, model choice, JSON output."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+from ..dataset import Dataset
+from ..estimators import DEFAULT_METHOD, method_names
+from ..io import Topics, load_dataset
+from ..structure import Structure, parse_effects
+
+DEFAULT_TOPICS = Topics()
+
+
+def add_data_args(parser: argparse.ArgumentParser) -> None:
+    """Topic names and the resampling step for reading bags and CSV files."""
+    group = parser.add_argument_group("data input (bags and CSV)")
+    for role in ("rudder", "heading", "yaw_rate", "speed"):
+        flag = role.replace("_", "-")
+        group.add_argument(f"--{flag}-topic", default=getattr(DEFAULT_TOPICS, role), metavar="TOPIC",
+                           help=f"std_msgs/Float64 {role.replace('_', ' ')} topic (default %(default)s)")
+    group.add_argument("--imu-topic", default="", metavar="TOPIC",
+                       help="sensor_msgs/Imu topic (ENU) for heading and yaw rate instead of the two "
+                            "Float64 topics")
+    group.add_argument("--sample-time", type=float, default=0.1, metavar="S",
+                       help="resampling step in s (default %(default)s)")
+
+
+def topics_from_args(args: argparse.Namespace) -> Topics:
+    return Topics(rudder=args.rudder_topic, heading=args.heading_topic,
+                  yaw_rate=args.yaw_rate_topic, speed=args.speed_topic, imu=args.imu_topic)
+
+
+def load_data(args: argparse.Namespace, path) -> Dataset:
+    """The Dataset of a bag or CSV file, read with the topics and sample time of ``args``."""
+    return load_dataset(path, topics_from_args(args), args.sample_time)
+
+
+def add_model_args(parser: argparse.ArgumentParser, method: bool = True) -> None:
+    """``--model``, ``--effects`` and (optionally) ``--method``."""
+    parser.add_argument("--model", default="nomoto2", choices=("nomoto1", "nomoto2"),
+                        help="base Nomoto model (default %(default)s)")
+    parser.add_argument("--effects", default="", metavar="A,B",
+                        help="comma-separated effects, e.g. rudder_offset,cubic_yaw (default: none)")
+    if method:
+        parser.add_argument("--method", default=DEFAULT_METHOD, metavar="NAME",
+                            help=f"estimator: {', '.join(method_names())} (default %(default)s)")
+
+
+def structure_from_args(args: argparse.Namespace) -> Structure:
+    return Structure(args.model, parse_effects(args.effects))
+
+
+def add_json_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON object on stdout and nothing else there")
+
+
+def strict_json(value):
+    """``value`` as plain JSON types, NaN and Inf replaced by None (any JSON parser accepts it)."""
+    if hasattr(value, "tolist"):  # numpy scalars and arrays
+        value = value.tolist()
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [strict_json(v) for v in value]
+    return value
+
+
+def dumps_json(record: dict, indent: int | None = None) -> str:
+    """Strict JSON text of a record (NaN/Inf as null)."""
+    return json.dumps(strict_json(record), indent=indent, allow_nan=False)

@@ -1,0 +1,96 @@
+"""``ship-ident diagnose``: where the model fails on held-out data and which effect it misses."""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+from ..diagnose import DEFAULT_METHOD, diagnose
+from ..structure import parse_effects, require_samples
+from .common import add_data_args, add_json_arg, add_model_args, dumps_json, load_data
+
+DEG = math.degrees(1.0)
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "diagnose", help="find where the model fails and which physical effect it misses",
+        description="Fit the model on the first part of the data, run it free on the held-out rest, "
+                    "show the worst segments and residual tests, and refit with every effect not "
+                    "yet in the model to rank what is missing. With --effects, the error before "
+                    "and after the last listed effect is shown.")
+    parser.add_argument("data", metavar="DATA", help="rosbag2 directory, .mcap file or CSV file")
+    add_model_args(parser)
+    parser.set_defaults(method=DEFAULT_METHOD)
+    parser.add_argument("--report", metavar="DIR", help="write an HTML report with plots to DIR/index.html")
+    parser.add_argument("--workers", type=int, default=None, metavar="N",
+                        help="processes for the candidate refits (default: CPU count)")
+    add_json_arg(parser)
+    add_data_args(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    start = time.monotonic()
+
+    def progress(message: str) -> None:
+        print(f"diagnose [{time.monotonic() - start:5.1f} s]: {message}", file=sys.stderr, flush=True)
+
+    dataset = load_data(args, args.data)
+    require_samples(dataset)
+    result = diagnose(dataset, args.model, parse_effects(args.effects), args.method,
+                      progress=progress, workers=args.workers)
+    if args.report:
+        from ..report import write_report
+        progress(f"writing the report to {args.report}")
+        path = write_report(result, args.report, source=str(args.data))
+        progress(f"report: {path}")
+    record = dict(result.to_json(), data=str(args.data))
+    print(dumps_json(record) if args.json else format_diagnosis(result, args.data))
+    return 0
+
+
+def format_diagnosis(result, source) -> str:
+    """Readable summary: held-out fit, before/after, worst segments, residual tests, candidates."""
+    fit = result.run.fit
+    lines = [f"{result.structure.label()} fitted on {result.training.duration:.0f} s of {source}, "
+             f"run free on {result.held_out.duration:.0f} s held out "
+             f"({len(result.held_out.segments)} free runs from the measured state)",
+             f"  held-out free-run: heading RMSE {fit['rmse_heading'] * DEG:.3g} deg "
+             f"(fit {fit['fit_percent_heading']:.1f} %), yaw rate RMSE {fit['rmse_yaw_rate'] * DEG:.3g} deg/s "
+             f"(fit {fit['fit_percent_yaw_rate']:.1f} %); yaw-rate noise floor "
+             f"{result.noise['yaw_rate'] * DEG:.3g} deg/s"]
+    if result.before is not None:
+        b = result.before_run.fit
+        lines.append(f"  before ({result.before.structure.label()}): heading RMSE "
+                     f"{b['rmse_heading'] * DEG:.3g} -> {fit['rmse_heading'] * DEG:.3g} deg, yaw rate RMSE "
+                     f"{b['rmse_yaw_rate'] * DEG:.3g} -> {fit['rmse_yaw_rate'] * DEG:.3g} deg/s")
+    lines.append("worst segments (short free runs from the measured state):")
+    for seg in result.worst_segments:
+        c = seg["conditions"]
+        was = (f" (before: {seg['rmse_heading_before'] * DEG:.3g} deg, "
+               f"{seg['rmse_yaw_rate_before'] * DEG:.3g} deg/s)") if "rmse_heading_before" in seg else ""
+        lines.append(f"  {seg['start']:7.1f}-{seg['end']:7.1f} s: heading {seg['rmse_heading'] * DEG:.3g} deg, "
+                     f"yaw rate {seg['rmse_yaw_rate'] * DEG:.3g} deg/s{was}; turning {c['turning']}, "
+                     f"|r| {c['mean_abs_yaw_rate_deg_s']:.2f} deg/s, heading {c['heading_sector']}, "
+                     f"rudder std {c['rudder_std_deg']:.1f} deg"
+                     + (f", speed {c['speed']:.2f} m/s" if "speed" in c else ""))
+    tests = result.residual_tests
+    lines.append(f"residual: {100 * tests['autocorrelation_outside']:.0f} % of autocorrelation lags and "
+                 f"{100 * tests['cross_correlation_outside']:.0f} % of rudder cross-correlation lags "
+                 f"outside +-{tests['bound']:.3f} (95 %)"
+                 + ("" if tests["white"] and tests["independent_of_rudder"] else
+                    ": the residual still carries structure the model lacks"))
+    lines += [f"  {w['message']}" for w in result.parameter_warnings]
+    lines.append(f"verdict: {result.verdict}")
+    for c in result.candidates:
+        lines.append(f"  {c.effect:<17} improvement {100 * c.improvement:5.1f} % "
+                     f"(heading {100 * c.improvement_heading:.0f} %, yaw rate {100 * c.improvement_yaw_rate:.0f} %), "
+                     f"{'significant' if c.significant else 'not significant'} (t {c.t_statistic:.1f})"
+                     f"{'; ' + c.note if c.note else ''}")
+        lines.append(f"      {c.evidence.sentence}")
+    if result.verdict == "missing_effect":
+        top = result.candidates[0].effect
+        effects = ",".join(result.structure.effect_names + (top,))
+        lines.append(f"next: ship-ident diagnose {source} --model {result.structure.model} --effects {effects}")
+    return "\n".join(lines)

@@ -1,0 +1,83 @@
+"""``ship-ident identify``: fit a model to a bag or CSV file and print (or save) the estimate."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ..errors import CommandError
+from ..estimators import make_estimator
+from ..estimators.base import MIN_RUDDER_STD, MIN_YAW_RATE_STD, excitation
+from ..structure import require_samples
+from .common import (add_data_args, add_json_arg, add_model_args, dumps_json, load_data,
+                     structure_from_args)
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "identify", help="identify a Nomoto model from a bag or CSV file",
+        description="Fit a Nomoto model (plus effects) to recorded or simulated data and report "
+                    "parameters, standard errors and the free-run fit.")
+    parser.add_argument("data", metavar="DATA", help="rosbag2 directory, .mcap file or CSV file")
+    add_model_args(parser)
+    parser.add_argument("--save", metavar="MODEL.json", help="write the estimate as a model file "
+                        "for `ship-ident compare`")
+    add_json_arg(parser)
+    add_data_args(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    structure = structure_from_args(args)
+    estimator = make_estimator(args.method)
+    dataset = load_data(args, args.data)
+    require_samples(dataset)
+    require_excitation(dataset)
+    estimate = estimator.fit(structure, dataset)
+    record = dict(estimate.to_json(), data=str(args.data))
+    if args.save:
+        Path(args.save).write_text(dumps_json(record, indent=2) + "\n")
+    print(dumps_json(record) if args.json else format_estimate(estimate, args.data))
+    return 0
+
+
+def require_excitation(dataset) -> None:
+    """Refuse data where the rudder or the yaw rate hardly moves: no model can be identified."""
+    active = excitation(dataset)
+    if active["rudder_std"] < MIN_RUDDER_STD or active["yaw_rate_std"] < MIN_YAW_RATE_STD:
+        raise CommandError(
+            f"too little excitation: rudder std {math.degrees(active['rudder_std']):.2f} deg "
+            f"(need {math.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std "
+            f"{math.degrees(active['yaw_rate_std']):.2f} deg/s (need {math.degrees(MIN_YAW_RATE_STD):.1f}); "
+            "record a manoeuvre such as a zigzag or turns")
+
+
+def format_estimate(estimate, source) -> str:
+    """A readable table of an Estimate: angles in degrees, other units SI."""
+    lines = [f"{estimate.structure.label()} identified by {estimate.method} from {source} "
+             f"({estimate.samples} samples, {estimate.window[1] - estimate.window[0]:.1f} s)",
+             f"  {'parameter':<10} {'value':>12} {'std error':>12}  unit"]
+    for name in estimate.structure.parameter_names:
+        unit, scale = display_unit(estimate.structure.parameter(name))
+        lines.append(f"  {name:<10} {estimate.parameters[name] * scale:>12.5g} "
+                     f"{estimate.std_errors[name] * scale:>12.3g}  {unit}")
+    lines.append(format_fit(estimate.fit))
+    if estimate.flags:
+        lines.append(f"flags: {', '.join(estimate.flags)}")
+    return "\n".join(lines)
+
+
+def display_unit(parameter) -> tuple[str, float]:
+    """(unit shown, SI-to-shown factor) of a parameter."""
+    if parameter.display_unit:
+        return parameter.display_unit, parameter.display_scale
+    return parameter.unit, 1.0
+
+
+def format_fit(fit: dict) -> str:
+    """The free-run fit figures, heading in deg and yaw rate in deg/s."""
+    deg = math.degrees(1.0)
+    return (f"free-run fit: heading RMSE {fit['rmse_heading'] * deg:.3g} deg, "
+            f"R {fit['r_heading']:.4f}, fit {fit['fit_percent_heading']:.1f} %; "
+            f"yaw rate RMSE {fit['rmse_yaw_rate'] * deg:.3g} deg/s, "
+            f"R {fit['r_yaw_rate']:.4f}, fit {fit['fit_percent_yaw_rate']:.1f} %"
+            + (" (diverged)" if fit.get("diverged") else ""))

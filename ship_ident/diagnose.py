@@ -1,0 +1,459 @@
+"""Diagnosis: where a fitted model and the measurements part, and which physical effect is missing.
+
+The model is fitted on the first part of the record (``TRAINING_FRACTION``)
+and judged only by free runs on the held-out rest: the held-out data are cut
+into windows and each window is simulated from its measured heading and yaw
+rate, driven by the measured rudder alone. For every effect not yet in the
+model, the model is refitted with that effect on the same training data and
+run free on the same held-out windows.
+
+* ``improvement`` of a candidate is the fraction of the held-out free-run
+  RMSE it removes, ``1 - rmse_after / rmse_before``, for heading and for
+  yaw rate separately; the candidate's improvement is the larger of the two
+  (a rudder offset shows in heading, a gyro bias in yaw rate).
+* ``significant`` is judged on the yaw rate, the model's direct output:
+  with the right model its free-run residual is the sensor's white noise
+  (the noise floor), whereas the heading error is a random walk that any
+  parameter scatter inflates. The yaw-rate RMSE must fall by at least
+  ``MIN_IMPROVEMENT`` and the drop in squared error must pass a
+  Diebold-Mariano test: the mean of the per-sample loss differential
+  ``e_before^2 - e_after^2`` over its standard error, with the sample count
+  reduced to the effective sample size of the autocorrelated differential,
+  exceeds ``SIGNIFICANCE_T``. A wrong effect only refits noise and
+  parameter scatter, which this test rejects; so does an effect whose gain
+  is lost in the measurement noise.
+* ``verdict`` is ``missing_effect`` when any candidate is significant,
+  otherwise ``adequate``.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
+from multiprocessing import get_context
+
+import numpy as np
+
+from .dataset import DataError, Dataset
+from .effects import EFFECTS, Evidence
+from .estimators import Estimate, make_estimator
+from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
+from .signals import Signals, compute_signals, noise_level
+from .structure import Structure
+
+DEFAULT_METHOD = "rlssvm+oe"   # cheap start + output-error refinement: the fits dominate the run time
+TRAINING_FRACTION = 0.65       # first part of the record for fitting, the rest is held out
+MIN_IMPROVEMENT = 0.15         # a candidate must remove at least this share of the held-out error
+SIGNIFICANCE_T = 3.0           # Diebold-Mariano t threshold (one-sided, ~6 candidates compared)
+MIN_HELD_OUT_S = 30.0          # s
+HELD_OUT_WINDOW_TIME_CONSTANTS = 40.0  # held-out free-run windows last this many yaw time constants ...
+HELD_OUT_WINDOW_MIN_S = 60.0           # ... but at least this long (s)
+WORST_WINDOW_TIME_CONSTANTS = 20.0     # worst-segment windows: this many time constants, 30-60 s
+WORST_WINDOW_LIMITS_S = (30.0, 60.0)
+WORST_SEGMENTS = 5
+MIN_SPEED_VARIATION = 0.02     # speed std / mean below which speed dependence is not tried
+CORRELATION_LAG_S = 10.0       # s, largest lag of the residual correlation tests
+
+
+@dataclass
+class ResidualContext:
+    """What an effect's ``evidence`` reads: the model's equation residual and the signals on the same rows.
+
+    ``equation_residual`` (rad/s) is what the right-hand side of the fitted
+    ODE lacks, ``T1 T2 r'' + (T1 + T2) r' + r - K (d + T3 d') - F``; a
+    positive value is a missing turning moment to starboard.
+    """
+
+    equation_residual: np.ndarray
+    signals: Signals
+    effective_samples: float
+    parameters: dict
+
+
+@dataclass
+class Candidate:
+    """An effect not yet in the model, refitted and judged on held-out free runs."""
+
+    effect: str
+    improvement: float
+    significant: bool
+    rmse_heading_after: float
+    rmse_yaw_rate_after: float
+    evidence: Evidence
+    improvement_heading: float = 0.0
+    improvement_yaw_rate: float = 0.0
+    t_statistic: float = 0.0
+    signal: str = "heading"            # the signal that improves most
+    estimate: Estimate | None = None
+    fit: dict | None = None
+    note: str = ""
+
+    def to_json(self) -> dict:
+        return {"effect": self.effect, "improvement": self.improvement, "significant": self.significant,
+                "rmse_heading_after": self.rmse_heading_after,
+                "rmse_yaw_rate_after": self.rmse_yaw_rate_after, "evidence": self.evidence.sentence,
+                "improvement_heading": self.improvement_heading,
+                "improvement_yaw_rate": self.improvement_yaw_rate, "t_statistic": self.t_statistic,
+                "improves_most": self.signal, "evidence_score": self.evidence.score,
+                "parameters": None if self.estimate is None else
+                {k: float(v) for k, v in self.estimate.parameters.items()}, "note": self.note}
+
+
+@dataclass
+class FreeRun:
+    """A model's free runs on the held-out windows and their fit figures (SI)."""
+
+    heading: np.ndarray
+    yaw_rate: np.ndarray
+    fit: dict
+
+
+@dataclass
+class Diagnosis:
+    """Everything the JSON record and the report show."""
+
+    dataset: Dataset
+    training: Dataset
+    held_out: Dataset                  # held-out samples, segments = free-run windows
+    estimate: Estimate                 # current model fitted on the training part
+    run: FreeRun                       # its held-out free runs
+    context: ResidualContext
+    candidates: list[Candidate]
+    worst_segments: list[dict]
+    residual_tests: dict
+    parameter_warnings: list[dict]
+    noise: dict
+    before: Estimate | None = None     # the model without the last listed effect (--effects)
+    before_run: FreeRun | None = None
+    evidences: dict = field(default_factory=dict)
+
+    @property
+    def structure(self) -> Structure:
+        return self.estimate.structure
+
+    @property
+    def verdict(self) -> str:
+        return "missing_effect" if any(c.significant for c in self.candidates) else "adequate"
+
+    def to_json(self) -> dict:
+        record = self.estimate.to_json()
+        record["fit"] = dict(self.run.fit, data="held-out")
+        record["verdict"] = self.verdict
+        record["candidates"] = [c.to_json() for c in self.candidates]
+        record["diagnosis"] = {
+            "training": {"start": float(self.training.time[0]), "end": float(self.training.time[-1]),
+                         "fit": self.estimate.fit},
+            "held_out": {"start": float(self.held_out.time[0]), "end": float(self.held_out.time[-1]),
+                         "windows": len(self.held_out.segments)},
+            "noise": self.noise,
+            "worst_segments": self.worst_segments,
+            "residual_tests": self.residual_tests,
+            "parameter_warnings": self.parameter_warnings,
+            "before": None if self.before is None else {
+                "structure": self.before.structure.to_json(),
+                "parameters": {k: float(v) for k, v in self.before.parameters.items()},
+                "fit": dict(self.before_run.fit, data="held-out")},
+        }
+        return record
+
+
+# --- held-out free runs --------------------------------------------------------
+def split(dataset: Dataset, training_fraction: float = TRAINING_FRACTION) -> tuple[Dataset, Dataset]:
+    """First ``training_fraction`` of the samples for fitting, the rest held out."""
+    cut = int(round(training_fraction * dataset.n_samples))
+    if (dataset.n_samples - cut) * dataset.sample_time < MIN_HELD_OUT_S:
+        raise DataError(f"{dataset.duration:.0f} s of data leave less than {MIN_HELD_OUT_S:.0f} s to "
+                        "hold out for validation; record a longer run")
+    return dataset.slice(0, cut), dataset.slice(cut, dataset.n_samples)
+
+
+def windows(dataset: Dataset, length_s: float) -> Dataset:
+    """The dataset with every segment cut into windows of about ``length_s`` (each its own free run)."""
+    step = max(int(round(length_s / dataset.sample_time)), 2)
+    cuts = []
+    for a, b in dataset.segments:
+        count = max(1, int(round((b - a) / step)))
+        edges = np.linspace(a, b, count + 1).round().astype(int)
+        cuts += [(int(s), int(e)) for s, e in zip(edges[:-1], edges[1:]) if e - s >= 2]
+    return replace(dataset, segments=tuple(cuts))
+
+
+def time_constant(parameters: dict) -> float:
+    """Dominant yaw time constant (s) of a Nomoto parameter set."""
+    return float(parameters.get("T", parameters.get("T1", 1.0) + parameters.get("T2", 0.0)))
+
+
+def free_run(structure: Structure, parameters: dict, dataset: Dataset) -> FreeRun:
+    """Free runs from the measured state at the start of every segment (window) of ``dataset``."""
+    heading, yaw_rate = structure.simulate(parameters, dataset)
+    return FreeRun(heading, yaw_rate, free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate))
+
+
+def loss_t_statistic(error_before: np.ndarray, error_after: np.ndarray) -> float:
+    """Diebold-Mariano t of the squared-error drop, on the effective sample size of the differential."""
+    ok = np.isfinite(error_before) & np.isfinite(error_after)
+    if not np.isfinite(error_after).all():
+        return -np.inf  # the refitted model diverges somewhere: never an improvement
+    d = error_before[ok] ** 2 - error_after[ok] ** 2
+    if len(d) < 4 or np.std(d) == 0:
+        return 0.0
+    effective = len(d) * effective_sample_fraction(d, max_lag=len(d) // 4)
+    return float(np.mean(d) / (np.std(d) / np.sqrt(max(effective, 1.0))))
+
+
+# --- the equation residual and the evidence ----------------------------------
+def _rows(signals: Signals) -> Signals:
+    rows = signals.rows
+    pick = (lambda v: None if v is None else v[rows])
+    return replace(signals, time=signals.time[rows], psi=signals.psi[rows], r=signals.r[rows],
+                   r_dot=signals.r_dot[rows], r_ddot=signals.r_ddot[rows], delta=signals.delta[rows],
+                   delta_dot=signals.delta_dot[rows], r_measured=signals.r_measured[rows],
+                   heading_rate=signals.heading_rate[rows], speed=pick(signals.speed),
+                   mask=np.ones(len(rows), bool), base_column_scales={})
+
+
+def equation_residual(structure: Structure, parameters: dict, signals: Signals) -> np.ndarray:
+    """What the fitted ODE's right-hand side lacks (rad/s) on every sample, through the effects' hooks."""
+    p = parameters
+    h = signals.sample_time
+    rudder = signals.delta
+    for effect in structure.effects:
+        rudder = effect.effective_rudder(signals.time, rudder, p)
+    rudder_rate = np.gradient(rudder, h) if len(rudder) > 1 else np.zeros_like(rudder)
+    gain = np.ones_like(signals.r)
+    tscale = np.ones_like(signals.r)
+    for effect in structure.effects:
+        scales = effect.speed_scales(signals.speed, p) if signals.speed is not None else None
+        if scales is not None:
+            gain, tscale = gain * scales[0], tscale * scales[1]
+    r = signals.r - structure.measured_yaw_rate(np.zeros(1), p)[0]
+    forcing = np.zeros_like(r)
+    for effect in structure.effects:
+        for term in effect.forcing_terms(p):
+            value = term.coefficient * r ** term.r_power * np.abs(r) ** term.abs_power
+            trig = {1: np.cos, 2: np.sin}.get(term.trig)
+            forcing += value * (trig(term.harmonic * signals.psi) if trig else 1.0)
+    if structure.order == 1:
+        left = p["T"] * tscale * signals.r_dot + r
+        right = p["K"] * gain * rudder
+    else:
+        left = (p["T1"] * p["T2"] * tscale ** 2 * signals.r_ddot
+                + (p["T1"] + p["T2"]) * tscale * signals.r_dot + r)
+        right = p["K"] * gain * (rudder + p["T3"] * tscale * rudder_rate)
+    return left - right - forcing
+
+
+def residual_context(structure: Structure, parameters: dict, dataset: Dataset) -> ResidualContext:
+    """The equation residual of a fitted model on ``dataset``, for the effects' evidence tests."""
+    signals = compute_signals(dataset)
+    residual = equation_residual(structure, parameters, signals)[signals.rows]
+    signals = _rows(signals)
+    effective = len(residual) * effective_sample_fraction(residual)
+    return ResidualContext(residual, signals, float(effective), dict(parameters))
+
+
+# --- where it fails ------------------------------------------------------------
+SECTORS = ("N", "NE", "E", "SE", "S", "SW", "W", "NW")
+
+
+def conditions(dataset: Dataset, a: int, b: int) -> dict:
+    """How the boat was sailing in samples [a, b): turn side, |r|, heading sector, speed, rudder activity."""
+    r = dataset.yaw_rate[a:b]
+    mean_r = float(np.mean(r))
+    turning = "straight" if abs(mean_r) < np.radians(0.5) else ("starboard" if mean_r > 0 else "port")
+    heading = float(np.degrees(np.mod(np.mean(dataset.heading[a:b]), 2 * np.pi)))
+    rudder = dataset.rudder[a:b]
+    out = {"turning": turning, "mean_abs_yaw_rate_deg_s": float(np.degrees(np.mean(np.abs(r)))),
+           "heading_deg": heading, "heading_sector": SECTORS[int(((heading + 22.5) % 360) // 45)],
+           "rudder_std_deg": float(np.degrees(np.std(rudder))),
+           "rudder_rate_deg_s": float(np.degrees(np.mean(np.abs(np.diff(rudder))) / dataset.sample_time))
+           if b - a > 1 else 0.0}
+    if dataset.speed is not None:
+        out["speed"] = float(np.mean(dataset.speed[a:b]))
+    return out
+
+
+def worst_segments(dataset: Dataset, structure: Structure, parameters: dict, length_s: float,
+                   count: int = WORST_SEGMENTS, before: Estimate | None = None) -> list[dict]:
+    """Windows of the whole record ranked by the error of short free runs started in each.
+
+    The score adds the heading and yaw-rate RMSE, each relative to its RMS
+    over all windows, so both signals weigh alike.
+    """
+    cut = windows(dataset, length_s)
+    heading, yaw_rate = structure.simulate(parameters, cut)
+    eh, er = heading - cut.heading, yaw_rate - cut.yaw_rate
+    scale_h = np.sqrt(np.nanmean(eh ** 2)) or 1.0
+    scale_r = np.sqrt(np.nanmean(er ** 2)) or 1.0
+    if before is not None:
+        heading_b, yaw_rate_b = before.structure.simulate(before.parameters, cut)
+    rows = []
+    for a, b in cut.segments:
+        rmse_h = float(np.sqrt(np.mean(eh[a:b] ** 2)))
+        rmse_r = float(np.sqrt(np.mean(er[a:b] ** 2)))
+        row = {"start": float(cut.time[a]), "end": float(cut.time[b - 1]),
+               "rmse_heading": rmse_h, "rmse_yaw_rate": rmse_r,
+               "score": rmse_h / scale_h + rmse_r / scale_r, "conditions": conditions(cut, a, b)}
+        if before is not None:
+            row["rmse_heading_before"] = float(np.sqrt(np.mean((heading_b[a:b] - cut.heading[a:b]) ** 2)))
+            row["rmse_yaw_rate_before"] = float(np.sqrt(np.mean((yaw_rate_b[a:b] - cut.yaw_rate[a:b]) ** 2)))
+        rows.append(row)
+    rows = [r if np.isfinite(r["score"]) else dict(r, score=np.inf) for r in rows]
+    return sorted(rows, key=lambda r: -r["score"])[:count]
+
+
+def correlation(x: np.ndarray, y: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lags and normalised cross-correlation sum(x_k y_{k+lag}) / (N sx sy) for |lag| <= max_lag."""
+    x, y = x - x.mean(), y - y.mean()
+    n = len(x)
+    den = n * x.std() * y.std()
+    lags = np.arange(-max_lag, max_lag + 1)
+    values = np.array([(x[:n - k] @ y[k:]) if k >= 0 else (x[-k:] @ y[:n + k]) for k in lags])
+    return lags, values / den if den > 0 else np.zeros(len(lags))
+
+
+def residual_tests(held_out: Dataset, run: FreeRun) -> dict:
+    """Whiteness of the held-out yaw-rate free-run residual and its cross-correlation with the rudder."""
+    residual = run.yaw_rate - held_out.yaw_rate
+    ok = np.isfinite(residual)
+    residual, rudder = residual[ok], held_out.rudder[ok]
+    n = len(residual)
+    max_lag = max(1, min(int(round(CORRELATION_LAG_S / held_out.sample_time)), n // 4))
+    bound = 1.96 / np.sqrt(max(n, 1))
+    lags, auto = correlation(residual, residual, max_lag)
+    _, cross = correlation(rudder, residual, max_lag)
+    positive = lags > 0
+    auto_out = float(np.mean(np.abs(auto[positive]) > bound))
+    cross_out = float(np.mean(np.abs(cross) > bound))
+    return {"signal": "yaw_rate", "samples": n, "bound": float(bound), "lag_step": held_out.sample_time,
+            "lags": lags.tolist(), "autocorrelation": auto.tolist(), "cross_correlation_rudder": cross.tolist(),
+            "autocorrelation_outside": auto_out, "cross_correlation_outside": cross_out,
+            "white": auto_out <= 0.1, "independent_of_rudder": cross_out <= 0.1}
+
+
+def parameter_warnings(estimate: Estimate) -> list[dict]:
+    """Parameters at their physical bounds or poorly determined (std error larger than the value)."""
+    out = []
+    structure = estimate.structure
+    for name in structure.free_names:
+        p = structure.parameter(name)
+        value, std = estimate.parameters[name], estimate.std_errors.get(name, np.inf)
+        tol = 1e-4 * max(1.0, abs(value))
+        pinned = [(b, side) for b, side in ((p.lower, "lower"), (p.upper, "upper"))
+                  if np.isfinite(b) and abs(value - b) <= tol]
+        for bound, side in pinned:
+            hint = " (a rudder delay looks like this)" if name == "T3" and side == "lower" else ""
+            out.append({"parameter": name, "value": float(value), "kind": f"at_{side}_bound",
+                        "message": f"{name} is pinned at its {side} bound {bound:g} {p.unit}{hint}"})
+        if not pinned and np.isfinite(std) and std > abs(value):
+            out.append({"parameter": name, "value": float(value), "kind": "poorly_determined",
+                        "message": f"{name} = {value:.4g} {p.unit} is poorly determined "
+                                   f"(std error {std:.2g})"})
+    return out
+
+
+# --- the diagnosis ---------------------------------------------------------------
+def _fit(structure: Structure, training: Dataset, method: str) -> Estimate:
+    return make_estimator(method).fit(structure, training)
+
+
+def _refit_task(args) -> Estimate | str:
+    structure, training, method = args
+    try:
+        return _fit(structure, training, method)
+    except ValueError as err:   # DataError, StructureError: the effect cannot be fitted to these data
+        return str(err)
+
+
+def _map(tasks: list, workers: int) -> list:
+    if workers <= 1 or len(tasks) <= 1:
+        return [_refit_task(t) for t in tasks]
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=get_context("fork")) as pool:
+        return list(pool.map(_refit_task, tasks))
+
+
+def _improvement(before: float, after: float) -> float:
+    return float(1.0 - after / before) if before > 0 and np.isfinite(after) else -np.inf
+
+
+def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, refit: Estimate | str) -> Candidate:
+    """A candidate's held-out improvement and its significance against the base model's free runs."""
+    if isinstance(refit, str):
+        return Candidate(effect, 0.0, False, base.fit["rmse_heading"], base.fit["rmse_yaw_rate"], evidence,
+                         note=f"not fitted: {refit}")
+    run = free_run(refit.structure, refit.parameters, held_out)
+    imp_h = _improvement(base.fit["rmse_heading"], run.fit["rmse_heading"])
+    imp_r = _improvement(base.fit["rmse_yaw_rate"], run.fit["rmse_yaw_rate"])
+    t = loss_t_statistic(base.yaw_rate - held_out.yaw_rate, run.yaw_rate - held_out.yaw_rate)
+    improvement = max(imp_h, imp_r)
+    significant = bool(imp_r >= MIN_IMPROVEMENT and t >= SIGNIFICANCE_T)
+    return Candidate(effect, float(improvement if np.isfinite(improvement) else -1.0), significant,
+                     run.fit["rmse_heading"], run.fit["rmse_yaw_rate"], evidence,
+                     improvement_heading=imp_h, improvement_yaw_rate=imp_r, t_statistic=t,
+                     signal="heading" if imp_h >= imp_r else "yaw_rate", estimate=refit, fit=run.fit)
+
+
+def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str = DEFAULT_METHOD,
+             progress=None, workers: int | None = None) -> Diagnosis:
+    """Fit, validate on held-out free runs, locate the failures and rank the missing effects.
+
+    With ``effects``, the model without the last listed effect is fitted too
+    (``before``), so the report shows the error fall that effect brought.
+    ``progress`` receives one-line messages; ``workers`` processes refit the
+    candidates (default: the CPU count).
+    """
+    say = progress or (lambda message: None)
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    dataset.check_finite()
+    structure = Structure(model, effects)
+    structure.check_data(dataset)
+    training, rest = split(dataset)
+    say(f"fitting {structure.label()} by {method} on {training.duration:.0f} s, "
+        f"holding out {rest.duration:.0f} s")
+    tasks = [(structure, training, method)]
+    if structure.effect_names:
+        tasks.append((structure.with_effects(structure.effect_names[:-1]), training, method))
+    fits = _map(tasks, workers)
+    if isinstance(fits[0], str):
+        raise DataError(f"cannot fit {structure.label()}: {fits[0]}")
+    estimate = fits[0]
+    before = fits[1] if len(fits) > 1 and not isinstance(fits[1], str) else None
+    window = max(HELD_OUT_WINDOW_MIN_S, HELD_OUT_WINDOW_TIME_CONSTANTS * time_constant(estimate.parameters))
+    held_out = windows(rest, window)
+    run = free_run(structure, estimate.parameters, held_out)
+    before_run = free_run(before.structure, before.parameters, held_out) if before else None
+    context = residual_context(structure, estimate.parameters, dataset)
+    names = [name for name in EFFECTS if name not in structure.effect_names]
+    evidences = {name: EFFECTS[name].evidence(context) for name in names}
+    speed_varies = dataset.speed is not None and np.std(dataset.speed) > MIN_SPEED_VARIATION * abs(
+        np.mean(dataset.speed))
+    fittable = [n for n in names if speed_varies or not EFFECTS[n].needs_speed]
+    say(f"refitting with each of {len(fittable)} candidate effects ({', '.join(fittable)}) "
+        f"on {min(workers, len(fittable))} processes")
+    refits = dict(zip(fittable, _map([(structure.with_effects(structure.effect_names + (n,)), training, method)
+                                      for n in fittable], workers)))
+    candidates = [judge(n, evidences[n], held_out, run,
+                        refits.get(n, "the speed hardly varies in these data")) for n in names]
+    candidates.sort(key=lambda c: (not c.significant, -c.improvement))
+    say("locating the worst segments and testing the residual")
+    tc = time_constant(estimate.parameters)
+    worst_window = float(np.clip(WORST_WINDOW_TIME_CONSTANTS * tc, *WORST_WINDOW_LIMITS_S))
+    worst = worst_segments(dataset, structure, estimate.parameters, worst_window, before=before)
+    noise = {"heading": noise_level(dataset.heading, np.radians(0.01)),
+             "yaw_rate": noise_level(dataset.yaw_rate, np.radians(0.01))}
+    return Diagnosis(dataset=dataset, training=training, held_out=held_out, estimate=estimate, run=run,
+                     context=context, candidates=candidates, worst_segments=worst,
+                     residual_tests=residual_tests(held_out, run),
+                     parameter_warnings=parameter_warnings(estimate), noise=noise,
+                     before=before, before_run=before_run, evidences=evidences)
+
+
+def signal_table(diagnosis: Diagnosis) -> list[dict]:
+    """Held-out free-run measures (RMSE, R, E', STD ratio, fit %) per signal, before and now."""
+    rows = []
+    runs = [("now", diagnosis.run)] + ([("before", diagnosis.before_run)] if diagnosis.before_run else [])
+    for label, run in runs:
+        for signal, measured, model in (("heading", diagnosis.held_out.heading, run.heading),
+                                        ("yaw_rate", diagnosis.held_out.yaw_rate, run.yaw_rate)):
+            rows.append(dict(signal_metrics(measured, model), model=label, signal=signal))
+    return rows

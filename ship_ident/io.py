@@ -1,0 +1,299 @@
+"""Bags and CSV files in and out: the file adapter around the numeric core.
+
+Reading accepts a rosbag2 directory (MCAP storage; ``metadata.yaml`` as
+``ros2 bag record -s mcap`` or rosbags writes it), a directory holding
+``.mcap`` files but no usable ``metadata.yaml`` (an interrupted recording,
+a copied folder), a bare ``.mcap`` file, or a CSV file
+``t,rudder,heading,yaw_rate[,speed]`` in SI units with a header line.
+
+Inputs are ``std_msgs/msg/Float64`` topics stamped with the bag's log time,
+or a ``sensor_msgs/msg/Imu`` topic (ROS ENU convention) for heading and yaw
+rate, converted to our NED convention: psi = pi/2 - yaw_enu, r = -omega_z.
+
+Every unusable input raises ``DataError`` with one sentence saying what is
+wrong and what to do.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import shutil
+import struct
+import tempfile
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.errors import ReaderError
+from rosbags.typesys import Stores, get_typestore
+
+from .dataset import DataError, Dataset, resample_series
+
+ROLES = ("rudder", "heading", "yaw_rate", "speed")
+CSV_COLUMNS = ("t", "rudder", "heading", "yaw_rate", "speed")  # speed optional
+FLOAT64 = "std_msgs/msg/Float64"
+IMU = "sensor_msgs/msg/Imu"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+BAD_BAG_ERRORS = (AnyReaderError, ReaderError, struct.error, EOFError, OSError, ValueError,
+                  KeyError, IndexError, AssertionError)
+
+
+class UnreadableBag(DataError):
+    """A bag whose files cannot be parsed (corrupt, truncated, unsupported metadata)."""
+
+
+@dataclass(frozen=True)
+class Topics:
+    """Input topic names; when ``imu`` is set, heading and yaw rate come from that Imu topic."""
+
+    rudder: str = "/usv/rudder"
+    heading: str = "/usv/heading"
+    yaw_rate: str = "/usv/yaw_rate"
+    speed: str = "/usv/speed"
+    imu: str = ""
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One measurement: time in s, role in ROLES, value in SI units (NED)."""
+
+    time: float
+    role: str
+    value: float
+
+
+@lru_cache(maxsize=1)
+def typestore():
+    """The ROS 2 Kilted message types (rosbags) used for writing and as reading fallback."""
+    return get_typestore(Stores.ROS2_KILTED)
+
+
+# --- reading -----------------------------------------------------------------
+
+def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
+    """All input samples of a bag or CSV file, time-ordered (see module docstring)."""
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path} does not exist; give a rosbag2 directory, a .mcap file or a CSV file")
+    if path.name == "metadata.yaml":
+        path = path.parent
+    if path.is_dir():
+        samples = _read_bag_dir(path, topics)
+    elif path.suffix.lower() == ".mcap" or _starts_with_mcap_magic(path):
+        samples = _read_bag([path], topics)
+    elif path.suffix.lower() in (".csv", ".txt"):
+        samples = _read_csv(path)
+    else:
+        raise DataError(f"{path} is neither a bag (rosbag2 directory or .mcap file) nor a CSV file "
+                        "(.csv); convert it or rename it")
+    _check_not_all_nan(path, samples)
+    samples.sort(key=lambda s: s.time)
+    return samples
+
+
+def load_dataset(path, topics: Topics = Topics(), sample_time: float = 0.1) -> Dataset:
+    """A bag or CSV file resampled onto a uniform grid (gaps split segments, heading unwrapped)."""
+    samples = read_samples(path, topics)
+    series = {}
+    for role in ROLES:
+        picked = [(s.time, s.value) for s in samples if s.role == role]
+        if picked:
+            series[role] = tuple(np.array(column) for column in zip(*picked))
+    return resample_series(series, sample_time, meta={"source": str(path)})
+
+
+def _starts_with_mcap_magic(path: Path) -> bool:
+    with path.open("rb") as f:
+        return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+
+
+def _read_bag_dir(path: Path, topics: Topics) -> list[Sample]:
+    """A rosbag2 directory; without a readable metadata.yaml, its .mcap files directly."""
+    mcaps = sorted(path.glob("*.mcap"))
+    if (path / "metadata.yaml").exists():
+        try:
+            return _read_bag([path], topics)
+        except UnreadableBag:
+            if not mcaps:
+                raise
+    if not mcaps:
+        raise DataError(f"{path} is a directory without metadata.yaml or .mcap files; "
+                        "give a rosbag2 directory recorded with MCAP storage")
+    return _read_bag(mcaps, topics)
+
+
+def _read_bag(paths: list[Path], topics: Topics) -> list[Sample]:
+    name = paths[0] if len(paths) == 1 else paths[0].parent
+    try:
+        with AnyReader(paths, default_typestore=typestore()) as reader:
+            return _bag_samples(reader, name, topics)
+    except DataError:
+        raise
+    except BAD_BAG_ERRORS as err:
+        raise UnreadableBag(f"{name} is not a readable MCAP bag ({err}); it is corrupt or truncated "
+                        "(an interrupted recording): re-record or re-export it") from None
+
+
+def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
+    if reader.message_count == 0:
+        raise DataError(f"{name} holds no messages; record the rudder, heading and yaw-rate topics")
+    found = {c.topic: c.msgtype for c in reader.connections}
+    wanted = {"rudder": topics.rudder, "speed": topics.speed}
+    if topics.imu:
+        wanted["imu"] = topics.imu
+    else:
+        wanted.update(heading=topics.heading, yaw_rate=topics.yaw_rate)
+    missing = [t for role, t in wanted.items() if role != "speed" and t not in found]
+    if missing:
+        have = ", ".join(f"{t} ({m})" for t, m in sorted(found.items())) or "none"
+        raise DataError(f"{name} has no topic {', '.join(missing)}; topics in it: {have}; "
+                        "choose the topics with the --*-topic options")
+    for role, topic in wanted.items():
+        expected = IMU if role == "imu" else FLOAT64
+        if topic in found and found[topic] != expected:
+            raise DataError(f"{name}: topic {topic} carries {found[topic]}, expected {expected}; "
+                            "choose another topic")
+    role_of = {t: role for role, t in wanted.items() if t in found}
+    samples = []
+    connections = [c for c in reader.connections if c.topic in role_of]
+    count = 0
+    for connection, log_time, raw in reader.messages(connections=connections):
+        role = role_of[connection.topic]
+        msg = reader.deserialize(raw, connection.msgtype)
+        if role == "imu":
+            samples.extend(imu_samples(msg, log_time * 1e-9))
+        else:
+            samples.append(Sample(log_time * 1e-9, role, float(msg.data)))
+        count += 1
+    indexed = sum(c.msgcount for c in connections)
+    if count < indexed:
+        raise UnreadableBag(f"{name} is corrupt or truncated: only {count} of its {indexed} indexed "
+                            "messages are readable; re-record or re-export it")
+    return samples
+
+
+def imu_samples(msg, log_time: float) -> tuple[Sample, Sample]:
+    """Heading and yaw rate (NED) from an ENU Imu message, stamped by its header when set."""
+    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+    time = stamp if stamp > 0 else log_time
+    q = msg.orientation
+    yaw_enu = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return (Sample(time, "heading", wrap_angle(math.pi / 2 - yaw_enu)),
+            Sample(time, "yaw_rate", -float(msg.angular_velocity.z)))
+
+
+def wrap_angle(angle: float) -> float:
+    """Angle wrapped to (-pi, pi] (rad)."""
+    wrapped = math.remainder(angle, 2 * math.pi)
+    return math.pi if wrapped == -math.pi else wrapped
+
+
+def _read_csv(path: Path) -> list[Sample]:
+    with path.open(newline="") as f:
+        rows = csv.reader(f)
+        header = [h.strip() for h in next(rows, [])]
+        missing = [c for c in CSV_COLUMNS[:4] if c not in header]
+        if missing:
+            raise DataError(f"{path} lacks the column(s) {', '.join(missing)}; the CSV needs the "
+                            "header line t,rudder,heading,yaw_rate[,speed] (SI units)")
+        columns = {c: header.index(c) for c in CSV_COLUMNS if c in header}
+        samples = []
+        for line, row in enumerate(rows, start=2):
+            if not row:
+                continue
+            try:
+                values = {c: float(row[i]) for c, i in columns.items()}
+            except (ValueError, IndexError):
+                raise DataError(f"{path} line {line} is not {len(columns)} numbers: {','.join(row)!r}; "
+                                "fix or delete that line") from None
+            samples.extend(Sample(values["t"], role, values[role]) for role in ROLES if role in values)
+    if not samples:
+        raise DataError(f"{path} holds a header but no data rows; export the data again")
+    return samples
+
+
+def _check_not_all_nan(path: Path, samples: list[Sample]) -> None:
+    for role in ROLES:
+        values = [s.value for s in samples if s.role == role]
+        if values and not any(math.isfinite(v) for v in values):
+            raise DataError(f"{path}: every {role} sample is NaN or Inf; check the sensor or the export")
+
+
+# --- writing -----------------------------------------------------------------
+
+class BagWriter:
+    """Write ROS 2 messages to a rosbag2 directory (``fmt='rosbag2'``) or a bare ``.mcap`` file.
+
+    A context manager; ``write(topic, msgtype, msg, time_s)`` takes a rosbags
+    message object of ``typestore()`` and its log time in s. Messages are
+    buffered in 1 MiB chunks and the file is completed on ``close``. Leaving
+    the ``with`` block by any exception, Ctrl-C (KeyboardInterrupt) included,
+    closes the bag: it is complete and readable. A killed process (SIGKILL,
+    power loss) leaves no readable bag.
+    """
+
+    def __init__(self, path, fmt: str = "rosbag2"):
+        if fmt not in ("rosbag2", "mcap"):
+            raise ValueError(f"unknown bag format {fmt!r}; use rosbag2 or mcap")
+        self.path = Path(path)
+        if self.path.exists():
+            raise DataError(f"{self.path} exists already; remove it or choose another output path")
+        self.fmt = fmt
+        # A bare .mcap is the storage file of a rosbag2 directory written beside it.
+        self._bag_dir = self.path if fmt == "rosbag2" else Path(
+            tempfile.mkdtemp(prefix=f".{self.path.name}.", dir=self.path.parent)) / "bag"
+        self._writer = Writer(self._bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer.open()
+        self._connections: dict[str, object] = {}
+
+    def write(self, topic: str, msgtype: str, msg, time_s: float) -> None:
+        connection = self._connections.get(topic)
+        if connection is None:
+            connection = self._writer.add_connection(topic, msgtype, typestore=typestore())
+            self._connections[topic] = connection
+        elif connection.msgtype != msgtype:
+            raise ValueError(f"topic {topic} was opened as {connection.msgtype}, not {msgtype}")
+        self._writer.write(connection, int(round(time_s * 1e9)), typestore().serialize_cdr(msg, msgtype))
+
+    def close(self) -> None:
+        if self._writer is None:
+            return
+        self._writer.close()
+        self._writer = None
+        if self.fmt == "mcap":
+            next(self._bag_dir.glob("*.mcap")).replace(self.path)
+            shutil.rmtree(self._bag_dir.parent)
+
+    def __enter__(self) -> "BagWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def write_simulation(sim, path, fmt: str = "rosbag2") -> None:
+    """Write a Simulation's measurements as the DESIGN.md Float64 topics (or CSV), heading wrapped."""
+    d = sim.dataset
+    columns = {"rudder": d.rudder, "heading": d.meta["wrapped_heading"], "yaw_rate": d.yaw_rate,
+               "speed": d.speed}
+    columns = {role: values for role, values in columns.items() if values is not None}
+    if fmt == "csv":
+        path = Path(path)
+        if path.exists():
+            raise DataError(f"{path} exists already; remove it or choose another output path")
+        with path.open("w", newline="") as f:
+            out = csv.writer(f)
+            out.writerow(["t", *columns])
+            out.writerows(zip(*(map(repr, map(float, v)) for v in (d.time, *columns.values()))))
+        return
+    if fmt not in ("rosbag2", "mcap"):
+        raise ValueError(f"unknown format {fmt!r}; use rosbag2, mcap or csv")
+    Float64 = typestore().types[FLOAT64]
+    topics = Topics()
+    with BagWriter(path, fmt) as writer:
+        for i, t in enumerate(d.time):
+            for role, values in columns.items():
+                writer.write(getattr(topics, role), FLOAT64, Float64(data=float(values[i])), float(t))

@@ -1,0 +1,289 @@
+"""ROS 2 node ``ship_ident``: online Nomoto identification on the vessel computer.
+
+A thin adapter around ``online.OnlineIdentifier``. Inputs (std_msgs/Float64,
+SI, NED; or a sensor_msgs/Imu in ENU for heading and yaw rate) are stamped on
+arrival with the node's clock, so ``use_sim_time`` with ``/clock`` works. A
+timer checks the refit schedule and hands each refit to one worker thread;
+callbacks never wait for a fit, and a refit still running when the next is
+due is skipped and reported. Outputs: ``~/parameters``
+(Float64MultiArray, names in ``layout.dim[0].label``), ``~/estimate`` (JSON
+String), ``~/predicted_yaw_rate`` (Float64, rad/s) and ``/diagnostics``.
+
+Run: ``identifier_node --ros-args --params-file config/ship_ident.yaml``
+(or ``python -m ship_ident.node``). SIGINT and SIGTERM stop it cleanly.
+"""
+from __future__ import annotations
+
+import os
+
+# Each fit solves systems of a few columns: a BLAS thread pool only burns CPU. Set before numpy loads.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import json  # noqa: E402
+import math  # noqa: E402
+import signal  # noqa: E402
+import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import fields
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType, SetParametersResult)
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
+
+from .estimators import method_names
+from .io import Sample, imu_samples
+from .online import CONDITION_LEVELS, ConfigError, OnlineConfig, OnlineIdentifier
+
+NODE_NAME = "ship_ident"
+TICKS_PER_REFIT = 5   # the schedule is checked this many times per refit period
+
+# name -> (description, (low, high) or None, read_only)
+PARAMETER_DOCS = {
+    "rudder_topic": ("std_msgs/Float64 rudder angle topic, rad (positive gives positive yaw rate)", None, True),
+    "heading_topic": ("std_msgs/Float64 heading topic, rad, NED (clockwise), may be wrapped", None, True),
+    "yaw_rate_topic": ("std_msgs/Float64 yaw rate topic, rad/s, NED (clockwise)", None, True),
+    "speed_topic": ("std_msgs/Float64 forward speed topic, m/s; empty: no speed input", None, True),
+    "imu_topic": ("sensor_msgs/Imu topic (ENU) used for heading and yaw rate instead of "
+                  "heading_topic and yaw_rate_topic; empty: not used", None, True),
+    "sample_time": ("s, grid step the window is resampled to", (0.01, 1.0), False),
+    "window_length": ("s of data in each fit", (10.0, 3600.0), False),
+    "refit_period": ("s between refits", (0.1, 3600.0), False),
+    "model": ("base model: nomoto1 (K, T) or nomoto2 (K, T1, T2, T3)", None, False),
+    "effects": ("effects added to the model: rudder_offset, cubic_yaw, rudder_delay, wind_yaw, "
+                "gyro_bias, speed_dependence", None, False),
+    "method": (f"estimator: {', '.join(method_names())}", None, False),
+    "min_window_length": ("s of data needed before the first fit", (1.0, 3600.0), False),
+    "min_rudder_std": ("rad; a window with less rudder activity gives no new estimate", (0.0, 0.5), False),
+    "min_fit_correlation": ("free-run yaw-rate correlation below which the fit is reported poor",
+                            (0.0, 1.0), False),
+    "stale_timeout": ("s without a sample before an input is reported stale", (0.01, 3600.0), False),
+    "gap_threshold": ("s without a sample that splits the window into segments", (0.01, 3600.0), False),
+    "clock_jump_threshold": ("s; a clock step back this large resets the window", (0.01, 3600.0), False),
+    "max_window_samples": ("hard bound on stored samples per input", (100, 10_000_000), False),
+    "prediction_horizon": ("s of free run from the measured state behind ~/predicted_yaw_rate",
+                           (0.1, 3600.0), False),
+    "qos_reliability": ("input QoS reliability: best_effort (sensor data) or reliable", None, True),
+    "qos_depth": ("input QoS history depth (messages kept per topic)", (1, 10000), True),
+}
+QOS_DEFAULTS = {"qos_reliability": "best_effort", "qos_depth": 100}
+RELIABILITY = {"best_effort": ReliabilityPolicy.BEST_EFFORT, "reliable": ReliabilityPolicy.RELIABLE}
+CONFIG_NAMES = [f.name for f in fields(OnlineConfig)]
+DIAGNOSTIC_LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
+
+
+def _descriptor(name: str, value) -> ParameterDescriptor:
+    description, limits, read_only = PARAMETER_DOCS[name]
+    descriptor = ParameterDescriptor(description=description, read_only=read_only)
+    if isinstance(value, (list, tuple)):
+        descriptor.type = ParameterType.PARAMETER_STRING_ARRAY
+    if limits and isinstance(value, float):
+        descriptor.floating_point_range = [FloatingPointRange(from_value=float(limits[0]),
+                                                              to_value=float(limits[1]))]
+    elif limits and isinstance(value, int):
+        descriptor.integer_range = [IntegerRange(from_value=limits[0], to_value=limits[1], step=1)]
+    return descriptor
+
+
+class IdentifierNode(Node):
+    """The ``ship_ident`` node (see module docstring)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        defaults = dict(OnlineConfig().to_json(), **QOS_DEFAULTS)
+        for name, value in defaults.items():
+            self.declare_parameter(name, value, _descriptor(name, value))
+        self.identifier = OnlineIdentifier(self._config_from_parameters())  # ConfigError on bad values
+        reliability = self.get_parameter("qos_reliability").value
+        if reliability not in RELIABILITY:
+            raise ConfigError(f"qos_reliability must be best_effort or reliable, got {reliability!r}")
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.get_parameter("qos_depth").value,
+                         reliability=RELIABILITY[reliability])
+        self._subscribe(self.identifier.config, qos)
+        self.parameters_pub = self.create_publisher(Float64MultiArray, "~/parameters", 10)
+        self.estimate_pub = self.create_publisher(String, "~/estimate", 10)
+        self.predicted_pub = self.create_publisher(Float64, "~/predicted_yaw_rate", 10)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="refit")
+        self._running = None            # Future of the refit in progress
+        self._overruns = 0              # refits skipped since the last published record
+        self._overrun_lock = threading.Lock()
+        self._callback_errors = 0
+        self._timer = None
+        self._start_timer(self.identifier.config.refit_period)
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        config = self.identifier.config
+        self.get_logger().info(
+            f"identifying {config.structure().label()} with {config.method}: window "
+            f"{config.window_length:g} s, refit every {config.refit_period:g} s")
+
+    # --- configuration ---------------------------------------------------
+    def _config_from_parameters(self, overrides: dict | None = None) -> OnlineConfig:
+        values = {name: self.get_parameter(name).value for name in CONFIG_NAMES}
+        values.update(overrides or {})
+        values["effects"] = tuple(values["effects"] or ())
+        return OnlineConfig(**values).validate()
+
+    def _check_parameters(self, parameters) -> SetParametersResult:
+        """Reject a change that would give an unusable configuration, saying why."""
+        changes = {p.name: p.value for p in parameters if p.name in CONFIG_NAMES}
+        if "effects" in changes:
+            changes["effects"] = tuple(changes["effects"] or ())
+        try:
+            self._config_from_parameters(changes)
+        except (ConfigError, TypeError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters) -> None:
+        """Accepted changes take effect at the next refit."""
+        old_period = self.identifier.config.refit_period
+        self.identifier.reconfigure(self._config_from_parameters())
+        config = self.identifier.config
+        if config.refit_period != old_period:
+            self._start_timer(config.refit_period)
+        self.get_logger().info(f"from the next refit: {config.structure().label()} with "
+                               f"{config.method}, window {config.window_length:g} s, "
+                               f"refit every {config.refit_period:g} s")
+
+    def _start_timer(self, refit_period: float) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        self._timer = self.create_timer(refit_period / TICKS_PER_REFIT, self._on_tick)
+
+    # --- inputs ----------------------------------------------------------
+    def _subscribe(self, config: OnlineConfig, qos: QoSProfile) -> None:
+        roles = {"rudder": config.rudder_topic, "speed": config.speed_topic}
+        if config.imu_topic:
+            self.create_subscription(Imu, config.imu_topic, self._on_imu, qos)
+        else:
+            roles.update(heading=config.heading_topic, yaw_rate=config.yaw_rate_topic)
+        for role, topic in roles.items():
+            if topic:
+                self.create_subscription(Float64, topic,
+                                         lambda msg, role=role: self._on_value(role, msg.data), qos)
+
+    def _now(self) -> float:
+        """Node clock time in s (simulated time when use_sim_time is set)."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_value(self, role: str, value) -> None:
+        try:
+            self.identifier.add(Sample(self._now(), role, float(value)))
+        except Exception as exc:  # a message must never stop the node
+            self._report_callback_error(exc)
+
+    def _on_imu(self, msg: Imu) -> None:
+        try:
+            for sample in imu_samples(msg, self._now()):
+                self.identifier.add(sample)
+        except Exception as exc:  # a message must never stop the node
+            self._report_callback_error(exc)
+
+    def _report_callback_error(self, exc: Exception) -> None:
+        self._callback_errors += 1
+        self.get_logger().warning(f"input dropped: {type(exc).__name__}: {exc}",
+                                  throttle_duration_sec=5.0)
+
+    # --- refits ----------------------------------------------------------
+    def _on_tick(self) -> None:
+        now = self._now()
+        if not self.identifier.due(now):
+            return
+        if self._running is not None and not self._running.done():
+            self.identifier.skip(now)
+            with self._overrun_lock:
+                self._overruns += 1
+            return
+        self._running = self._worker.submit(self._refit, now)
+
+    def _refit(self, now: float) -> None:
+        """Worker thread: refit and publish; any failure is reported, never raised."""
+        try:
+            record = self.identifier.refit(now)
+            with self._overrun_lock:
+                overruns, self._overruns = self._overruns, 0
+            if overruns:
+                record.conditions["refit_overran"] = (
+                    f"{overruns} refit(s) skipped: the previous refit was still running; "
+                    "raise refit_period or choose a faster method")
+            self._publish(record)
+        except Exception as exc:
+            self.get_logger().error(f"refit failed: {type(exc).__name__}: {exc}")
+            self._publish_diagnostics(now, 2, {"refit_failed": f"{type(exc).__name__}: {exc}"}, {})
+
+    def _publish(self, record) -> None:
+        data = record.to_json()
+        estimate_msg = String()
+        estimate_msg.data = json.dumps(data)
+        self.estimate_pub.publish(estimate_msg)
+        if data["parameters"]:
+            names = list(data["parameters"])
+            msg = Float64MultiArray()
+            msg.layout.dim = [MultiArrayDimension(label=",".join(names), size=len(names), stride=len(names))]
+            msg.data = [float(data["parameters"][n]) for n in names]
+            self.parameters_pub.publish(msg)
+        if math.isfinite(record.predicted_yaw_rate):
+            self.predicted_pub.publish(Float64(data=record.predicted_yaw_rate))
+        values = {k: str(v) for k, v in record.counts.items()}
+        values["callback_errors"] = str(self._callback_errors)
+        if data["parameters"]:
+            values.update({k: f"{v:.6g}" for k, v in data["parameters"].items()})
+            values["rmse_yaw_rate"] = f"{data['fit'].get('rmse_yaw_rate', math.nan):.6g}"
+        values["refit_seconds"] = f"{record.compute_seconds:.4f}"
+        self._publish_diagnostics(record.time, record.level, record.conditions, values)
+
+    def _publish_diagnostics(self, now: float, level: int, conditions: dict, values: dict) -> None:
+        status = DiagnosticStatus(level=DIAGNOSTIC_LEVELS[level], name=f"{NODE_NAME}: identification",
+                                  hardware_id=self.get_fully_qualified_name())
+        ordered = sorted(conditions, key=lambda c: -CONDITION_LEVELS.get(c, 2))
+        status.message = "; ".join(f"{c.replace('_', ' ')}: {conditions[c]}" for c in ordered) \
+            or "estimating"
+        status.values = [KeyValue(key=f"condition/{c}", value=conditions[c]) for c in ordered] + \
+            [KeyValue(key=k, value=v) for k, v in values.items()]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self.diagnostics_pub.publish(array)
+
+    def shutdown(self) -> None:
+        """Stop the timer and wait for a refit in progress."""
+        self.destroy_timer(self._timer)
+        self._worker.shutdown(wait=True, cancel_futures=True)
+
+
+def main(argv=None) -> int:
+    """Console script ``identifier_node``: spin until SIGINT or SIGTERM."""
+    argv = sys.argv if argv is None else argv
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    try:
+        node = IdentifierNode()
+    except (ConfigError, rclpy.exceptions.ParameterException) as exc:
+        print(f"identifier_node: error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        node.shutdown()
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

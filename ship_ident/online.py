@@ -1,0 +1,440 @@
+"""Online identification core shared by the ROS node and ``ship-ident replay``.
+
+Samples (time in s, SI values, NED) arrive one by one, per role (rudder,
+heading, yaw rate, speed). ``OnlineIdentifier`` keeps a sliding window of the
+last ``window_length`` seconds of each role, rejects samples that cannot be
+used, and on a fixed period (``refit_period``, on whatever clock feeds it:
+the node's clock, or the bag's time in replay) resamples the window to
+``sample_time`` and refits the configured model. Nothing here knows ROS or
+files, so the node and replay run the very same code.
+
+Each refit returns a ``RefitRecord``: the estimate in force (a new one, or
+the last good one when this window could not give one), the window it came
+from, the model's predicted yaw rate at the window end, and the conditions
+found (no data, stale input, gap, too little excitation, poor fit, ...), each
+with a severity OK / WARN / ERROR and a sentence.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time as wallclock
+from collections import deque
+from dataclasses import asdict, dataclass, field, fields, replace
+
+import numpy as np
+
+from .dataset import DataError, resample_series
+from .estimators import MethodError, make_estimator
+from .estimators.base import MIN_RUDDER_STD
+from .io import ROLES, Sample
+from .structure import Structure, StructureError
+
+REQUIRED_ROLES = ("rudder", "heading", "yaw_rate")
+
+# Largest magnitude a sensor can plausibly report (SI); beyond it a sample is a fault.
+ABSURD_LIMITS = {
+    "rudder": math.radians(90.0),   # rad: no rudder turns beyond 90 deg
+    "heading": 1000.0,              # rad: wrapped or unwrapped compass heading
+    "yaw_rate": 3.0,                # rad/s (172 deg/s): no USV turns faster
+    "speed": 50.0,                  # m/s
+}
+
+OK, WARN, ERROR = 0, 1, 2
+LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
+
+# Severity of each condition a refit can report.
+CONDITION_LEVELS = {
+    "no_data": ERROR,
+    "window_filling": WARN,
+    "stale_input": WARN,
+    "gap_in_window": WARN,
+    "too_little_excitation": WARN,
+    "poor_fit": WARN,
+    "refit_failed": ERROR,
+    "refit_overran": WARN,
+    "rejected_samples": WARN,
+    "clock_jump": WARN,
+}
+
+REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
+
+# Estimator flags that make an estimate unusable even with a good-looking fit: the closed-form
+# map gave a gain or time constant outside its physical range.
+POOR_FIT_FLAGS = ("complex_time_constants", "K_out_of_bounds", "T_out_of_bounds", "T1_out_of_bounds",
+                  "T2_out_of_bounds")
+
+
+class ConfigError(ValueError):
+    """An online configuration value out of range or unknown; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class OnlineConfig:
+    """Everything the online identifier and the node are configured with (SI units)."""
+
+    rudder_topic: str = "/usv/rudder"
+    heading_topic: str = "/usv/heading"
+    yaw_rate_topic: str = "/usv/yaw_rate"
+    speed_topic: str = ""                 # empty: no speed input
+    imu_topic: str = ""                   # sensor_msgs/Imu (ENU) instead of heading and yaw rate
+    sample_time: float = 0.1              # s, grid the window is resampled to
+    window_length: float = 180.0          # s of data in each fit
+    refit_period: float = 5.0             # s between refits
+    model: str = "nomoto2"
+    effects: tuple = ("rudder_offset", "cubic_yaw")
+    method: str = "rwlssvm"
+    min_window_length: float = 60.0       # s of data before the first fit
+    min_rudder_std: float = float(MIN_RUDDER_STD)  # rad: less rudder activity gives no new estimate
+    min_fit_correlation: float = 0.8      # free-run yaw-rate correlation below this is a poor fit
+    stale_timeout: float = 1.0            # s without a sample on an input before it is stale
+    gap_threshold: float = 0.5            # s without a sample that splits the window
+    clock_jump_threshold: float = 1.0     # s: a stamp this far back is a clock jump (window reset)
+    max_window_samples: int = 20000       # hard bound on stored samples per input
+    prediction_horizon: float = 10.0      # s of free run behind the predicted yaw rate
+
+    def __post_init__(self):
+        effects = self.effects
+        if isinstance(effects, str):
+            effects = [e for e in effects.split(",")]
+        object.__setattr__(self, "effects", tuple(e.strip() for e in effects if e.strip()))
+
+    def validate(self) -> "OnlineConfig":
+        """Raise ConfigError naming the first bad value; return self when all are usable."""
+        positive = ("sample_time", "window_length", "refit_period", "stale_timeout",
+                    "gap_threshold", "clock_jump_threshold", "prediction_horizon")
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ConfigError(f"{name} must be a finite number > 0 s, got {value!r}")
+        if self.sample_time > 1.0:
+            raise ConfigError(f"sample_time {self.sample_time} s is too coarse for yaw dynamics; use <= 1 s")
+        if not 0 < self.min_window_length <= self.window_length:
+            raise ConfigError(f"min_window_length must be in (0, window_length={self.window_length}] s, "
+                              f"got {self.min_window_length}")
+        if self.window_length < 20 * self.sample_time:
+            raise ConfigError(f"window_length {self.window_length} s holds fewer than 20 samples "
+                              f"of {self.sample_time} s")
+        if self.gap_threshold < self.sample_time:
+            raise ConfigError(f"gap_threshold {self.gap_threshold} s must be >= sample_time "
+                              f"{self.sample_time} s")
+        if not 0 <= self.min_rudder_std < 0.5:
+            raise ConfigError(f"min_rudder_std must be in [0, 0.5) rad, got {self.min_rudder_std}")
+        if not 0 <= self.min_fit_correlation <= 1:
+            raise ConfigError(f"min_fit_correlation must be in [0, 1], got {self.min_fit_correlation}")
+        needed = int(math.ceil(self.window_length / self.sample_time))
+        if self.max_window_samples < max(needed, 100):
+            raise ConfigError(f"max_window_samples {self.max_window_samples} cannot hold a "
+                              f"{self.window_length} s window at {self.sample_time} s "
+                              f"(need >= {max(needed, 100)})")
+        for name in ("rudder_topic", "heading_topic", "yaw_rate_topic"):
+            if not self.imu_topic and not getattr(self, name):
+                raise ConfigError(f"{name} is empty; name the topic (or set imu_topic for heading "
+                                  "and yaw rate)")
+        try:
+            structure = self.structure()
+            make_estimator(self.method)
+        except (StructureError, MethodError) as exc:
+            raise ConfigError(str(exc)) from None
+        if structure.needs_speed and not self.speed_topic:
+            raise ConfigError("speed_dependence needs speed_topic set")
+        return self
+
+    def structure(self) -> Structure:
+        return Structure(self.model, list(self.effects))
+
+    def changed(self, **values) -> "OnlineConfig":
+        """A validated copy with some values replaced."""
+        return replace(self, **values).validate()
+
+    @classmethod
+    def field_names(cls) -> list[str]:
+        return [f.name for f in fields(cls)]
+
+    def to_json(self) -> dict:
+        out = asdict(self)
+        out["effects"] = list(self.effects)
+        return out
+
+
+@dataclass
+class RefitRecord:
+    """The outcome of one refit: the estimate in force and what was found on the way."""
+
+    time: float                         # s, clock time the refit ran at
+    conditions: dict                    # condition name -> sentence
+    estimate: dict | None = None        # Estimate.to_json() in force (new or last good)
+    new_estimate: bool = False          # True when this refit produced the estimate
+    window: tuple = (math.nan, math.nan)  # s, start and end of the data in the window
+    predicted_yaw_rate: float = math.nan  # rad/s at the window end, free run from measured state
+    measured_yaw_rate: float = math.nan   # rad/s at the window end
+    compute_seconds: float = 0.0        # wall time of the refit
+    counts: dict = field(default_factory=dict)  # cumulative input counts by outcome
+
+    @property
+    def level(self) -> int:
+        return max((CONDITION_LEVELS[c] for c in self.conditions), default=OK)
+
+    @property
+    def status(self) -> str:
+        return LEVEL_NAMES[self.level]
+
+    def to_json(self) -> dict:
+        """The ``~/estimate`` / ``replay --json`` record: the identify JSON plus online fields."""
+        estimate = self.estimate or {}
+        return {
+            "stamp": self.time,
+            "status": self.status,
+            "conditions": dict(self.conditions),
+            "new_estimate": self.new_estimate,
+            "structure": estimate.get("structure"),
+            "method": estimate.get("method"),
+            "parameters": estimate.get("parameters", {}),
+            "std_errors": estimate.get("std_errors", {}),
+            "fit": estimate.get("fit", {}),
+            "samples": estimate.get("samples", 0),
+            "flags": estimate.get("flags", []),
+            "estimate_window": estimate.get("window"),
+            "window": {"start": self.window[0], "end": self.window[1]},
+            "predicted_yaw_rate": self.predicted_yaw_rate,
+            "measured_yaw_rate": self.measured_yaw_rate,
+            "compute_seconds": self.compute_seconds,
+            "counts": dict(self.counts),
+        }
+
+
+class OnlineIdentifier:
+    """Sliding-window identifier: ``add`` samples, ``due``/``refit`` on a period.
+
+    Thread-safe: ``add`` (from message callbacks) and ``refit`` (from a worker)
+    may run on different threads; the refit copies the window under a lock and
+    fits outside it. Configuration changes take effect at the next refit.
+    """
+
+    def __init__(self, config: OnlineConfig):
+        self._lock = threading.Lock()
+        self._config = config.validate()
+        cap = config.max_window_samples
+        self._window = {role: deque(maxlen=cap) for role in ROLES}
+        self._newest = {role: -math.inf for role in ROLES}  # s, last accepted stamp per role
+        self._latest_time = -math.inf   # s, newest stamp or clock reading seen
+        self._next_due: float | None = None
+        self.counts = {"accepted": 0, **{r: 0 for r in REJECTIONS}, "clock_jumps": 0}
+        self._reported = dict(self.counts)
+        self._last_jump = 0.0
+        self._last_good = None      # Estimate of the current structure
+        self._last_good_window = (math.nan, math.nan)
+
+    # --- configuration ---------------------------------------------------
+    @property
+    def config(self) -> OnlineConfig:
+        return self._config
+
+    def reconfigure(self, config: OnlineConfig) -> None:
+        """Use a new configuration from the next refit on (window and schedule are kept)."""
+        config = config.validate()
+        with self._lock:
+            if (config.model, config.effects) != (self._config.model, self._config.effects):
+                self._last_good = None
+            if config.refit_period != self._config.refit_period and self._next_due is not None:
+                self._next_due = min(self._next_due, self._latest_time + config.refit_period)
+            self._config = config
+
+    # --- input -----------------------------------------------------------
+    def add(self, sample: Sample) -> str:
+        """Store a sample; return ``accepted`` or why it was rejected (also counted)."""
+        with self._lock:
+            outcome = self._check(sample)
+            self.counts[outcome] += 1
+            if outcome == "accepted":
+                self._window[sample.role].append((sample.time, sample.value))
+                self._newest[sample.role] = sample.time
+                self._latest_time = max(self._latest_time, sample.time)
+            return outcome
+
+    def _check(self, sample: Sample) -> str:
+        if sample.role not in ROLES:
+            raise ValueError(f"unknown role {sample.role!r}; use one of {', '.join(ROLES)}")
+        if not (math.isfinite(sample.time) and math.isfinite(sample.value)):
+            return "non_finite"
+        if abs(sample.value) > ABSURD_LIMITS[sample.role]:
+            return "absurd"
+        self._observe_clock(sample.time)
+        newest = self._newest[sample.role]
+        if sample.time == newest:
+            return "duplicate"
+        if sample.time < newest:
+            return "out_of_order"
+        return "accepted"
+
+    def _observe_clock(self, now: float) -> None:
+        """A clock reading far behind the newest time seen is a jump back: reset window and schedule."""
+        if now < self._latest_time - self._config.clock_jump_threshold:
+            self._last_jump = self._latest_time - now
+            self.counts["clock_jumps"] += 1
+            for role in ROLES:
+                self._window[role].clear()
+                self._newest[role] = -math.inf
+            self._latest_time = now
+            self._next_due = now + self._config.refit_period
+        else:
+            self._latest_time = max(self._latest_time, now)
+
+    # --- schedule --------------------------------------------------------
+    def due(self, now: float) -> bool:
+        """Whether a refit is due at clock time ``now`` (s); the schedule starts at the first call."""
+        with self._lock:
+            self._observe_clock(now)
+            if self._next_due is None:
+                self._next_due = now + self._config.refit_period
+            return now >= self._next_due
+
+    def skip(self, now: float) -> None:
+        """Move the schedule past ``now`` without refitting (a refit was still running)."""
+        with self._lock:
+            self._advance_schedule(now)
+
+    def _advance_schedule(self, now: float) -> None:
+        period = self._config.refit_period
+        if self._next_due is None or now - self._next_due >= period:
+            self._next_due = now + period
+        else:
+            self._next_due += period
+
+    # --- refit -----------------------------------------------------------
+    def refit(self, now: float) -> RefitRecord:
+        """Fit the window as it is at clock time ``now`` (s) and advance the schedule."""
+        started = wallclock.perf_counter()
+        with self._lock:
+            self._observe_clock(now)
+            self._advance_schedule(now)
+            config = self._config
+            for role in ROLES:
+                self._prune(self._window[role], now - config.window_length)
+            series = {role: np.array(self._window[role], dtype=float).reshape(-1, 2)
+                      for role in ROLES}
+            newest = dict(self._newest)
+            counts = dict(self.counts)
+            fresh = {k: counts[k] - self._reported[k] for k in counts}
+            self._reported = counts
+            last_good, last_window = self._last_good, self._last_good_window
+            last_jump = self._last_jump
+        conditions = self._input_conditions(config, series, newest, now, fresh, last_jump)
+        record = RefitRecord(time=now, conditions=conditions, counts=counts)
+        if "no_data" not in conditions and "window_filling" not in conditions:
+            self._fit(config, series, last_good, record)
+        if record.estimate is None and last_good is not None:
+            record.estimate = last_good.to_json()
+            record.window = last_window
+        record.compute_seconds = wallclock.perf_counter() - started
+        return record
+
+    @staticmethod
+    def _prune(window: deque, oldest: float) -> None:
+        while window and window[0][0] < oldest:
+            window.popleft()
+
+    @staticmethod
+    def _input_conditions(config, series, newest, now, fresh, last_jump) -> dict:
+        conditions = {}
+        roles = [r for r in REQUIRED_ROLES] + (["speed"] if config.speed_topic else [])
+        empty = [r for r in roles if len(series[r]) < 2]
+        if empty:
+            conditions["no_data"] = f"no {', '.join(empty)} data in the last {config.window_length:g} s"
+        else:
+            span = min(series[r][-1, 0] for r in roles) - max(series[r][0, 0] for r in roles)
+            if span < config.min_window_length - 0.5 * config.sample_time:
+                conditions["window_filling"] = (f"window holds {max(span, 0):.0f} s of "
+                                                f"{config.min_window_length:g} s needed for a first fit")
+        stale = [f"{r} ({now - newest[r]:.1f} s)" for r in roles
+                 if math.isfinite(newest[r]) and now - newest[r] > config.stale_timeout]
+        if stale:
+            conditions["stale_input"] = "no new samples on " + ", ".join(stale)
+        rejected = {k: fresh[k] for k in REJECTIONS if fresh[k]}
+        if rejected:
+            conditions["rejected_samples"] = "rejected since last refit: " + ", ".join(
+                f"{n} {k.replace('_', '-')}" for k, n in rejected.items())
+        if fresh["clock_jumps"]:
+            conditions["clock_jump"] = (f"clock jumped back {last_jump:.1f} s; "
+                                        "window and schedule were reset")
+        return conditions
+
+    def _fit(self, config: OnlineConfig, series: dict, last_good, record: RefitRecord) -> None:
+        roles = [r for r in ROLES if r != "speed" or config.speed_topic]
+        try:
+            dataset = resample_series({r: (series[r][:, 0], series[r][:, 1]) for r in roles},
+                                      config.sample_time, config.gap_threshold)
+        except DataError as exc:
+            record.conditions["refit_failed"] = f"window unusable: {exc}"
+            return
+        record.window = (float(dataset.time[0]), float(dataset.time[-1]))
+        if dataset.gaps:
+            longest = max(b - a for a, b in dataset.gaps)
+            record.conditions["gap_in_window"] = (f"{len(dataset.gaps)} gap(s) in the window, longest "
+                                                  f"{longest:.1f} s; fitting the segments apart")
+        rudder_std = float(np.std(dataset.rudder))
+        if rudder_std < config.min_rudder_std:
+            record.conditions["too_little_excitation"] = (
+                f"rudder std {math.degrees(rudder_std):.2f} deg < "
+                f"{math.degrees(config.min_rudder_std):.2f} deg; keeping the last good estimate")
+            return
+        structure = config.structure()
+        estimator = make_estimator(config.method)
+        try:
+            if hasattr(estimator, "refine") and last_good is not None and last_good.ok \
+                    and last_good.method == config.method:
+                estimate = estimator.refine(structure, dataset, last_good)  # warm start
+            else:
+                estimate = estimator.fit(structure, dataset)
+        except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
+            record.conditions["refit_failed"] = f"{type(exc).__name__}: {exc}"
+            return
+        if not estimate.ok:
+            if "low_excitation" in estimate.flags:
+                record.conditions["too_little_excitation"] = \
+                    "the yaw rate hardly moves in the window; keeping the last good estimate"
+            else:
+                record.conditions["refit_failed"] = (f"estimate rejected ({', '.join(estimate.flags)}); "
+                                                     "keeping the last good estimate")
+            return
+        correlation = estimate.fit.get("r_yaw_rate", math.nan)
+        at_bounds = [f for f in estimate.flags if f in POOR_FIT_FLAGS]
+        if not correlation >= config.min_fit_correlation or at_bounds:
+            record.conditions["poor_fit"] = (
+                f"free-run yaw-rate correlation {correlation:.2f} (needs >= "
+                f"{config.min_fit_correlation:g}){', ' + ', '.join(at_bounds) if at_bounds else ''}: "
+                "the model misses the motion; keeping the last good estimate")
+            return
+        record.estimate = estimate.to_json()
+        record.estimate.pop("info", None)
+        record.new_estimate = True
+        record.predicted_yaw_rate, record.measured_yaw_rate = self._predict(
+            config, structure, estimate.parameters, dataset)
+        with self._lock:
+            if (config.model, config.effects) == (self._config.model, self._config.effects):
+                self._last_good, self._last_good_window = estimate, record.window
+
+    @staticmethod
+    def _predict(config, structure, params, dataset) -> tuple[float, float]:
+        """Yaw rate (rad/s) at the window end: the model run free over the last
+        ``prediction_horizon`` s from the measured state, and the measurement."""
+        stop = dataset.n_samples
+        start = max(dataset.segments[-1][0], stop - int(round(config.prediction_horizon / config.sample_time)))
+        tail = dataset.slice(start, stop)
+        try:
+            _, r = structure.simulate(params, tail)
+        except (DataError, StructureError, ValueError):
+            return math.nan, float(dataset.yaw_rate[-1])
+        return float(r[-1]), float(dataset.yaw_rate[-1])
+
+
+def run_schedule(identifier: OnlineIdentifier, samples):
+    """Feed time-ordered samples with their own stamps as the clock; yield each refit's record.
+
+    This is the node's loop with the bag's time for the node's clock: a refit
+    due at a sample's time runs on everything that arrived before it.
+    """
+    for sample in samples:
+        if identifier.due(sample.time):
+            yield identifier.refit(sample.time)
+        identifier.add(sample)

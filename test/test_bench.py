@@ -1,0 +1,54 @@
+"""Smoke runs of every benchmark at tiny sizes (``--quick``), asserting sane numbers."""
+import json
+
+import numpy as np
+import pytest
+
+from ship_ident.bench import benchmarks
+from ship_ident.bench.crb import cramer_rao_bound
+from ship_ident.cli import main
+from ship_ident.dataset import Dataset
+from ship_ident.simulator import simulate
+
+
+def test_benchmarks_register_themselves_by_name():
+    assert {"seed-table2", "efficiency", "speed"} <= set(benchmarks())
+
+
+def test_seed_table2_quick_reproduces_the_failure_and_the_fix():
+    bench = benchmarks()["seed-table2"]
+    result = bench.run(True)
+    errors = {m: r["relative_error_percent"] for m, r in result["methods"].items()}
+    assert errors["lssvm"]["delta_r"] == -100.0
+    for name in ("K", "T1", "delta_r"):
+        assert abs(errors["rwlssvm+oe"][name]) < 0.5
+    assert all(np.isfinite(v["heading_deg"]) for r in result["methods"].values() for v in r["rmse"].values())
+    assert "paper reconstructed+APSO-WLSSVM" in bench.render(result)
+
+
+def test_efficiency_quick_gives_bounded_errors_and_coverages():
+    result = benchmarks()["efficiency"].run(True)
+    for maneuver in result["maneuvers"].values():
+        oe = maneuver["methods"]["rwlssvm+oe"]
+        for q, s in oe.items():
+            assert s["crb_percent"] > 0 and np.isfinite(s["rms_percent"]), q
+            assert 0.0 <= s.get("coverage_95", 0.0) <= 1.0
+        assert oe["K"]["rms_percent"] < 3.0
+
+
+def test_crb_shrinks_with_the_noise_and_matches_its_scaling():
+    sim = simulate("zigzag20", noise=0.0, duration=120.0, seed=0)
+    d = sim.dataset
+    exact = Dataset(time=d.time, rudder=sim.true_rudder, heading=sim.true_heading, yaw_rate=sim.true_yaw_rate)
+    a = cramer_rao_bound(sim.structure, sim.truth, exact, [(0.0, 0.0, 0.0)], 1e-3, 2e-3)
+    b = cramer_rao_bound(sim.structure, sim.truth, exact, [(0.0, 0.0, 0.0)], 2e-3, 4e-3)
+    for name in a:
+        assert b[name] == pytest.approx(2 * a[name], rel=1e-6)
+
+
+def test_bench_speed_quick_json_is_one_object(capsys):
+    assert main(["bench", "speed", "--quick", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["benchmark"] == "speed"
+    for method, times in result["median_seconds"].items():
+        assert all(0 < t < 60 for t in times.values()), method

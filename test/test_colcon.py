@@ -1,0 +1,61 @@
+"""The package builds with colcon into a ROS 2 install space whose executables start."""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE_ROOT = Path(__file__).parents[1]
+VENV_BIN = Path(sys.executable).parent
+NOT_SOURCES = shutil.ignore_patterns(".venv", ".git", "build", "install", "log", "__pycache__",
+                                     "*.egg-info", ".pytest_cache", "out")
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    """A colcon workspace holding a copy of the package, built with the venv's colcon."""
+    root = tmp_path_factory.mktemp("ws")
+    shutil.copytree(PACKAGE_ROOT, root / "src" / "ship_ident", ignore=NOT_SOURCES)
+    env = dict(os.environ, PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
+    result = subprocess.run(["colcon", "build", "--base-paths", "src"], cwd=root, env=env,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return root
+
+
+def run_sourced(workspace: Path, command: str) -> subprocess.CompletedProcess:
+    """Run ``command`` in bash after sourcing the install space (as ``ros2 run`` would see it)."""
+    env = dict(os.environ, AMENT_PREFIX_PATH=str(VENV_BIN.parent),
+               PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
+    return subprocess.run(["bash", "-c", f"source install/setup.bash && {command}"], cwd=workspace,
+                          env=env, capture_output=True, text=True, timeout=120)
+
+
+def test_colcon_installs_executables_and_ament_marker(workspace):
+    install = workspace / "install" / "ship_ident"
+    assert (install / "share" / "ament_index" / "resource_index" / "packages" / "ship_ident").is_file()
+    assert (install / "share" / "ship_ident" / "package.xml").is_file()
+    assert (install / "share" / "ship_ident" / "bags" / "demo_seed001.mcap").is_file()
+    for executable in ("identifier_node", "ship-ident"):
+        path = install / "lib" / "ship_ident" / executable
+        assert path.is_file() and os.access(path, os.X_OK), path
+
+
+def test_built_ship_ident_starts_from_the_install_space(workspace):
+    result = run_sourced(workspace, "install/ship_ident/lib/ship_ident/ship-ident --help")
+    assert result.returncode == 0, result.stderr
+    assert "simulate" in result.stdout and "identify" in result.stdout
+    where = run_sourced(workspace, "python -c 'import ship_ident; print(ship_ident.__file__)'")
+    assert str(workspace / "install") in where.stdout, where.stdout + where.stderr
+
+
+def test_built_identifier_node_entry_point_imports(workspace):
+    """identifier_node spins until SIGINT (no quick-exit option): only its entry point is checked."""
+    if not (PACKAGE_ROOT / "ship_ident" / "node.py").exists():
+        pytest.skip("ship_ident/node.py is not written yet")
+    result = run_sourced(workspace, "python -c 'from ship_ident.node import main; assert callable(main)'")
+    assert result.returncode == 0, result.stderr

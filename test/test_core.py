@@ -1,0 +1,107 @@
+"""The numeric core against exact solutions: integrator, resampling, structure."""
+import numpy as np
+import pytest
+from scipy import signal
+
+from ship_ident.dataset import DataError, Dataset, resample_series
+from ship_ident.simulator import simulate
+from ship_ident.structure import Structure, StructureError
+
+
+def _dataset(time, rudder):
+    zeros = np.zeros_like(time)
+    return Dataset(time=time, rudder=rudder, heading=zeros, yaw_rate=zeros)
+
+
+def test_nomoto1_step_response_matches_closed_form():
+    h, K, T, delta = 0.1, 0.4, 3.0, np.radians(10)
+    time = np.arange(0, 30, h)
+    rudder = np.full_like(time, delta)
+    psi, r = Structure("nomoto1").simulate({"K": K, "T": T}, _dataset(time, rudder))
+    exact_r = K * delta * (1 - np.exp(-time / T))
+    exact_psi = K * delta * (time - T * (1 - np.exp(-time / T)))
+    assert np.max(np.abs(r - exact_r)) < 1e-9
+    assert np.max(np.abs(psi - exact_psi)) < 1e-8
+
+
+def test_nomoto2_matches_lti_simulation_with_first_order_hold():
+    h = 0.1
+    p = {"K": 0.5883, "T1": 1.4397, "T2": 0.1202, "T3": 0.0440}
+    time = np.arange(0, 60, h)
+    rudder = np.radians(20) * np.sin(0.4 * time) * (time > 2)
+    _, r = Structure("nomoto2").simulate(p, _dataset(time, rudder))
+    system = signal.lti([p["K"] * p["T3"], p["K"]], [p["T1"] * p["T2"], p["T1"] + p["T2"], 1.0])
+    fine = np.arange(0, 60 - h + 1e-9, 0.001)
+    _, r_exact, _ = signal.lsim(system, np.interp(fine, time, rudder), fine)
+    assert np.max(np.abs(r[:-1] - np.interp(time[:-1], fine, r_exact))) < 2e-5 * np.max(np.abs(r))
+
+
+def test_simulated_heading_is_wrapped_but_dataset_unwrapped():
+    sim = simulate("turning", "seed001", duration=120, noise=0.0)
+    wrapped = sim.dataset.meta["wrapped_heading"]
+    assert np.all(wrapped <= np.pi) and np.all(wrapped > -np.pi)
+    assert np.ptp(sim.dataset.heading) > 2 * np.pi  # a turning circle goes round
+    assert np.allclose(np.mod(sim.dataset.heading - wrapped + np.pi, 2 * np.pi) - np.pi, 0, atol=1e-9)
+
+
+def test_simulator_noise_levels_are_as_configured():
+    clean = simulate("random", "seed001", duration=300, noise=0.0, seed=3)
+    noisy = simulate("random", "seed001", duration=300, noise=1.0, seed=3)
+    assert np.std(noisy.dataset.yaw_rate - clean.dataset.yaw_rate) == pytest.approx(np.radians(0.2), rel=0.05)
+    assert np.std(noisy.dataset.rudder - clean.dataset.rudder) == pytest.approx(np.radians(0.1), rel=0.05)
+
+
+def test_rudder_is_rate_limited_and_saturated():
+    sim = simulate("zigzag20", "seed001", duration=120, noise=0.0)
+    rate = np.abs(np.diff(sim.true_rudder)) / 0.1
+    assert rate.max() <= np.radians(20.0) + 1e-9
+    assert np.abs(sim.true_rudder).max() <= np.radians(35.0) + 1e-12
+    assert np.abs(sim.true_rudder).max() == pytest.approx(np.radians(20.0), abs=1e-9)
+
+
+def test_resample_splits_gaps_sorts_and_unwraps():
+    t = np.arange(0, 100, 0.05)
+    keep = (t < 40) | (t > 50)  # a 10 s dropout of the yaw rate
+    heading = np.mod(0.2 * t + np.pi, 2 * np.pi) - np.pi
+    series = {
+        "rudder": (t[::-1], np.sin(t)[::-1]),  # out of order
+        "heading": (np.concatenate([t, t[:5]]), np.concatenate([heading, heading[:5]])),  # duplicates
+        "yaw_rate": (t[keep], np.full(keep.sum(), 0.2)),
+    }
+    ds = resample_series(series, 0.1)
+    assert len(ds.segments) == 2
+    assert len(ds.gaps) == 1 and ds.gaps[0][0] == pytest.approx(39.95) and ds.gaps[0][1] == pytest.approx(50.05)
+    assert not np.any((ds.time > 40) & (ds.time < 50))
+    assert np.allclose(np.diff(ds.heading[ds.segments[0][0]:ds.segments[0][1]]), 0.02, atol=1e-9)
+    assert np.allclose(ds.rudder, np.sin(ds.time), atol=2e-3)
+
+
+def test_resample_rejects_nonoverlapping_and_missing_signals():
+    t = np.arange(0, 10, 0.1)
+    with pytest.raises(DataError, match="no usable yaw_rate"):
+        resample_series({"rudder": (t, t), "heading": (t, t), "yaw_rate": (t[:1], t[:1])}, 0.1)
+    with pytest.raises(DataError, match="do not overlap"):
+        resample_series({"rudder": (t, t), "heading": (t + 100, t), "yaw_rate": (t, t)}, 0.1)
+
+
+def test_structure_rejects_unknown_names_and_lists_parameters():
+    with pytest.raises(StructureError, match="unknown effect 'wind'"):
+        Structure("nomoto2", ["wind"])
+    with pytest.raises(StructureError, match="unknown model"):
+        Structure("nomoto3")
+    s = Structure("nomoto2", "rudder_offset,cubic_yaw")
+    assert s.parameter_names == ["K", "T1", "T2", "T3", "delta_r", "alpha"]
+    assert Structure("nomoto1", ["speed_dependence"]).fixed_names == ["U_ref"]
+
+
+def test_parameter_change_midway_keeps_motion_continuous():
+    sim = simulate("random", "seed001", duration=200, noise=0.0, seed=4,
+                   change=(100.0, {"K": 0.5883 * 0.7, "T1": 1.4397 * 1.3}))
+    r = sim.true_yaw_rate
+    i = 1000
+    assert abs(r[i + 1] - r[i]) < 5 * np.median(np.abs(np.diff(r))) + 1e-3
+    assert sim.info["truth_after"]["K"] == pytest.approx(0.5883 * 0.7)
+    # after the change the steady turn rate follows the new gain
+    held = simulate("random", "seed001", duration=200, noise=0.0, seed=4)
+    assert np.allclose(r[:i], held.true_yaw_rate[:i])
+    assert not np.allclose(r[i + 50:], held.true_yaw_rate[i + 50:])

@@ -1,0 +1,127 @@
+"""Every estimator against known truth on simulated data, and the LS-SVM identities."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ship_ident.estimators import make_estimator, method_names
+from ship_ident.estimators.lssvm import (lssvm_dual_bias_free, lssvm_dual_with_bias, lssvm_primal_with_bias,
+                                         ridge_primal)
+from ship_ident.simulator import simulate
+from ship_ident.structure import Structure
+
+REGRESSIONS = ("ols", "lssvm", "rlssvm", "rwlssvm", "tlssvm")
+
+
+def rel(est, truth, name):
+    return abs(est.parameters[name] / truth[name] - 1)
+
+
+@pytest.fixture(scope="module")
+def clean():
+    """Noise-free 20/20 zigzag of seed 001's vessel, h = 0.1 s (the seed-table2 data, shorter)."""
+    return simulate("zigzag20", noise=0.0, duration=300.0, seed=0)
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    """Mixed manoeuvre with realistic noise: rudder 0.1 deg, heading 0.1 deg, yaw rate 0.2 deg/s."""
+    return simulate("mixed", noise=1.0, duration=600.0, seed=1)
+
+
+@pytest.mark.parametrize("method", REGRESSIONS)
+def test_regressions_recover_gain_and_time_constant_noise_free(clean, method):
+    est = make_estimator(method).fit(clean.structure, clean.dataset)
+    t = clean.truth
+    assert rel(est, t, "K") < 0.01 and rel(est, t, "T1") < 0.02
+    if method != "lssvm":
+        assert rel(est, t, "delta_r") < 0.01
+    assert all(np.isfinite(v) for v in est.std_errors.values() if method != "lssvm")
+
+
+@pytest.mark.parametrize("method", REGRESSIONS)
+def test_regressions_recover_gain_and_time_constant_with_noise(noisy, method):
+    est = make_estimator(method).fit(noisy.structure, noisy.dataset)
+    assert rel(est, noisy.truth, "K") < 0.02 and rel(est, noisy.truth, "T1") < 0.03
+    assert np.isfinite(est.std_errors["K"]) and est.std_errors["K"] > 0
+
+
+def test_lssvm_with_bias_gives_zero_rudder_offset_exactly(clean):
+    est = make_estimator("lssvm").fit(clean.structure, clean.dataset)
+    assert est.parameters["delta_r"] == 0.0
+
+
+def test_output_error_recovers_all_parameters_noise_free(clean):
+    est = make_estimator("rwlssvm+oe").fit(clean.structure, clean.dataset)
+    t = clean.truth
+    for name in ("K", "T1", "delta_r"):
+        assert rel(est, t, name) < 0.005, name
+    assert rel(est, t, "alpha") < 0.05
+    assert rel(est, t, "T2") < 0.10 and rel(est, t, "T3") < 0.10
+
+
+def test_output_error_meets_noisy_targets_and_std_errors_are_finite(noisy):
+    est = make_estimator("rwlssvm+oe").fit(noisy.structure, noisy.dataset)
+    t, p = noisy.truth, est.parameters
+    assert rel(est, t, "K") < 0.01 and rel(est, t, "T1") < 0.03 and rel(est, t, "delta_r") < 0.03
+    t_eff = t["T1"] + t["T2"] - t["T3"]
+    assert abs((p["T1"] + p["T2"] - p["T3"]) / t_eff - 1) < 0.02
+    assert all(np.isfinite(s) and s >= 0 for s in est.std_errors.values())
+    assert abs(p["K"] - t["K"]) < 4 * est.std_errors["K"]
+    assert est.ok
+
+
+@pytest.mark.parametrize("weighted", [False, True])
+def test_bias_free_primal_equals_dual(weighted):
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(60, 5)) * [1, 10, 0.1, 3, 1]
+    y = X @ rng.normal(size=5) + 0.1 * rng.normal(size=60)
+    v = rng.uniform(0.1, 1.0, size=60) if weighted else None
+    w_primal, _ = ridge_primal(X, y, 50.0, v)
+    np.testing.assert_allclose(w_primal, lssvm_dual_bias_free(X, y, 50.0, v), rtol=1e-9, atol=1e-12)
+
+
+def test_lssvm_dual_with_bias_equals_primal_and_zeroes_constant_column():
+    rng = np.random.default_rng(4)
+    X = np.column_stack([rng.normal(size=(50, 3)), np.ones(50)])
+    y = X @ np.array([1.0, -2.0, 0.5, 3.0]) + 0.05 * rng.normal(size=50)
+    w_dual, b_dual, alpha = lssvm_dual_with_bias(X, y, 100.0)
+    w_primal, b_primal = lssvm_primal_with_bias(X, y, 100.0)
+    np.testing.assert_allclose(w_dual, w_primal, rtol=1e-9, atol=1e-12)
+    assert b_dual == pytest.approx(b_primal, rel=1e-9)
+    assert abs(alpha.sum()) < 1e-10 and abs(w_dual[3]) < 1e-10
+
+
+def test_tlssvm_reports_truncation_level(noisy):
+    for rule in ("gcv", "lcurve", "picard"):
+        est = make_estimator("tlssvm", rule=rule).fit(noisy.structure, noisy.dataset)
+        assert 1 <= est.info["truncation"] <= est.info["of"] == len(est.info["columns"])
+
+
+def test_rwlssvm_is_deterministic_for_a_seed(noisy):
+    a = make_estimator("rwlssvm", seed=7).fit(noisy.structure, noisy.dataset)
+    b = make_estimator("rwlssvm", seed=7).fit(noisy.structure, noisy.dataset)
+    assert a.parameters == b.parameters
+
+
+def test_rwlssvm_is_robust_to_yaw_rate_spikes(noisy):
+    clean_k = make_estimator("rwlssvm").fit(noisy.structure, noisy.dataset).parameters["K"]
+    rng = np.random.default_rng(5)
+    yaw_rate = noisy.dataset.yaw_rate.copy()
+    spikes = rng.choice(len(yaw_rate), size=len(yaw_rate) // 100, replace=False)
+    yaw_rate[spikes] += 50 * np.radians(0.2) * rng.choice([-1.0, 1.0], size=len(spikes))
+    spiky = replace(noisy.dataset, yaw_rate=yaw_rate)
+    est = make_estimator("rwlssvm").fit(noisy.structure, spiky)
+    assert abs(est.parameters["K"] / clean_k - 1) < 0.03
+    assert est.info["downweighted"] > 0
+
+
+def test_straight_course_is_flagged_low_excitation():
+    sim = simulate("zigzag10", noise=1.0, duration=200.0, seed=2, amplitude=np.radians(0.2))
+    est = make_estimator("rwlssvm").fit(Structure("nomoto2", ["rudder_offset"]), sim.dataset)
+    assert "low_excitation" in est.flags and not est.ok
+
+
+def test_method_names_all_build():
+    for name in method_names():
+        assert make_estimator(name).name == name

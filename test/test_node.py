@@ -1,0 +1,199 @@
+"""The identifier node as a real process over real DDS, fed by `ship-ident play` or a scripted publisher."""
+import itertools
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from ship_ident.commands.play import Player
+from ship_ident.demo import Listener, ros_environment, start_node, start_play, stop
+from ship_ident.io import write_simulation
+from ship_ident.simulator import simulate
+
+_test_index = itertools.count()
+
+
+@pytest.fixture
+def domain_id():
+    """A ROS domain per test: xdist worker and test index keep concurrent tests apart (1..100)."""
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0)
+    return 1 + (worker * 37 + 7 * next(_test_index) + os.getpid() % 13) % 100
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory):
+    sim = simulate("mixed", duration=300.0, seed=5)
+    path = tmp_path_factory.mktemp("node") / "sim.mcap"
+    write_simulation(sim, path, "mcap")
+    return path, sim.truth
+
+
+@pytest.fixture
+def env(domain_id, tmp_path):
+    return ros_environment(domain_id, tmp_path)
+
+
+def node_process(env, *parameters):
+    return start_node(env, "use_sim_time:=true", *parameters, stdout=subprocess.PIPE,
+                      stderr=subprocess.STDOUT, text=True)
+
+
+def final_estimate(listener):
+    return next(e for e in reversed(listener.estimates) if e["new_estimate"])
+
+
+def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
+    path, truth = bag
+    node = node_process(env)
+    listener = Listener(domain_id)
+    play = start_play(env, path, 10.0, stderr=subprocess.PIPE, text=True)
+    try:
+        while play.poll() is None:
+            listener.spin(0.2)
+        listener.spin(1.5)
+        assert play.returncode == 0, play.stderr.read()
+        assert node.poll() is None
+    finally:
+        stop(play)
+        code, log, _ = stop(node)
+        listener.close()
+    assert code == 0, log
+    final = final_estimate(listener)
+    assert final["stamp"] > 280.0 and final["status"] in ("OK", "WARN"), final["conditions"]
+    assert final["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)
+    assert listener.parameters[-1].layout.dim[0].label == "K,T1,T2,T3,delta_r,alpha"
+    assert any(s.name == "ship_ident: identification" for s in listener.diagnostics)
+    replayed = subprocess.run([sys.executable, "-m", "ship_ident.cli", "replay", str(path), "--json"],
+                              capture_output=True, text=True, timeout=120, env=env)
+    records = [json.loads(line) for line in replayed.stdout.splitlines()]
+    twin = min(records, key=lambda r: abs(r["stamp"] - final["stamp"]))
+    assert abs(twin["stamp"] - final["stamp"]) <= 1.0
+    # Arrival stamping (node) against bag stamps (replay) moves samples by up to one /clock step.
+    assert final["parameters"]["K"] == pytest.approx(twin["parameters"]["K"], rel=0.02)
+    assert final["parameters"]["T1"] == pytest.approx(twin["parameters"]["T1"], rel=0.05)
+
+
+def test_effects_change_at_run_time(env, domain_id, bag):
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    path, _ = bag
+    node = node_process(env, "refit_period:=2.0", "min_window_length:=30.0", "window_length:=60.0")
+    listener = Listener(domain_id)
+    play = start_play(env, path, 10.0, "--loop", stderr=subprocess.DEVNULL)
+    client = AsyncParameterClient(listener.node, "ship_ident")
+
+    def set_parameter(name, kind, value):
+        future = client.set_parameters([Parameter(name, kind, value)])
+        assert listener.spin(10.0, future.done)
+        return future.result().results[0]
+
+    try:
+        assert listener.spin(25.0, lambda: any(e["new_estimate"] for e in listener.estimates))
+        before = final_estimate(listener)
+        assert before["structure"]["effects"] == ["rudder_offset", "cubic_yaw"]
+        assert client.wait_for_services(timeout_sec=10.0)
+        rejected = set_parameter("effects", Parameter.Type.STRING_ARRAY, ["barnacles"])
+        assert not rejected.successful and "unknown effect 'barnacles'" in rejected.reason
+        rejected = set_parameter("method", Parameter.Type.STRING, "magic")
+        assert not rejected.successful and "unknown method" in rejected.reason
+        rejected = set_parameter("rudder_topic", Parameter.Type.STRING, "/other")
+        assert not rejected.successful  # topics are read-only
+        assert set_parameter("effects", Parameter.Type.STRING_ARRAY, ["gyro_bias"]).successful
+        changed = lambda: any(e["new_estimate"] and e["structure"]["effects"] == ["gyro_bias"]
+                              for e in listener.estimates)
+        assert listener.spin(20.0, changed)
+        listener.spin(1.0)
+        assert node.poll() is None
+    finally:
+        stop(play)
+        code, log, _ = stop(node)
+        listener.close()
+    assert code == 0, log
+    after = final_estimate(listener)
+    assert "delta_r" not in after["parameters"] and "r_bias" in after["parameters"]
+    assert listener.parameters[-1].layout.dim[0].label == "K,T1,T2,T3,r_bias"
+    assert after["fit"]["rmse_yaw_rate"] != before["fit"]["rmse_yaw_rate"]
+
+
+def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
+    """NaN, Inf, absurd values, duplicates, out-of-order stamps, a silent topic, a clock jump back."""
+    sim = simulate("mixed", duration=200.0, seed=6)
+    d = sim.dataset
+    node = node_process(env, "refit_period:=1.0", "window_length:=30.0", "min_window_length:=10.0")
+    listener = Listener(domain_id)
+    player = Player(listener.node)
+    try:
+        assert player.wait_for_subscribers(20.0)
+
+        def send(i, t, skip=()):
+            player.publish_clock(t)
+            for role, value in (("rudder", d.rudder[i]), ("heading", d.heading[i]),
+                                ("yaw_rate", d.yaw_rate[i])):
+                if role not in skip:
+                    player.publish(role, value)
+            listener.spin(0.005)  # 20x real time
+
+        for i in range(400):                                  # 0 .. 40 s clean
+            send(i, 0.1 * i)
+        player.publish("rudder", math.nan)                    # faults at 40 s
+        player.publish("heading", math.inf)
+        player.publish("yaw_rate", 100.0)
+        player.publish("rudder", d.rudder[399])               # same clock: duplicate stamp
+        def settle_clock(t):  # /clock and data travel apart over DDS: let the step land first
+            for _ in range(3):
+                player.publish_clock(t)
+                listener.spin(0.1)
+
+        # 50 ms back: out of order. A node busy refitting may take a data message before a
+        # clock message that arrived first, so the episode is repeated a few times.
+        for k in range(5):
+            settle_clock(40.0 + 0.01 * k)
+            player.publish("yaw_rate", d.yaw_rate[400])
+            listener.spin(0.1)
+            settle_clock(39.95 + 0.01 * k)
+            player.publish("yaw_rate", d.yaw_rate[400])
+        for i in range(400, 600):                             # yaw rate silent 45 .. 50 s
+            send(i, 0.1 * i, skip=("yaw_rate",) if 450 <= i < 500 else ())
+        for i in range(600, 700):                             # clock jumps back 30 s at 60 s
+            send(i, 0.1 * i - 30.0)
+        listener.spin(1.0)
+        assert node.poll() is None
+    finally:
+        code, log, _ = stop(node)
+        listener.close()
+    assert code == 0, log
+    reported = {}
+    for status in listener.diagnostics:
+        for kv in status.values:
+            if kv.key.startswith("condition/"):
+                reported.setdefault(kv.key[len("condition/"):], []).append(kv.value)
+    rejected = " ".join(reported.get("rejected_samples", []))
+    for word in ("non-finite", "absurd", "duplicate", "out-of-order"):
+        assert word in rejected, reported
+    assert "stale_input" in reported and "yaw_rate" in reported["stale_input"][0]
+    assert "gap_in_window" in reported
+    assert "clock_jump" in reported
+    assert b"\x01" in {status.level for status in listener.diagnostics}  # WARN on faults
+    assert np.isfinite(listener.estimates[-1]["parameters"]["K"])
+
+
+def test_node_rejects_bad_start_parameters_in_one_line(env):
+    result = subprocess.run([sys.executable, "-m", "ship_ident.node", "--ros-args",
+                             "-p", "effects:=[barnacles]"], env=env, capture_output=True, text=True,
+                            timeout=30)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        result.stderr.strip().splitlines()[-1]] and "unknown effect" in result.stderr
+
+
+def test_node_stops_on_sigterm(env):
+    node = start_node(env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    time.sleep(2.0)
+    node.terminate()
+    assert node.wait(timeout=5) == 0

@@ -60,9 +60,10 @@ CONDITION_LEVELS = {
 REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
 
 # Estimator flags that make an estimate unusable even with a good-looking fit: the closed-form
-# map gave a gain or time constant outside its physical range.
+# map gave a gain or time constant outside its physical range, or the output-error search
+# stopped before it converged.
 POOR_FIT_FLAGS = ("complex_time_constants", "K_out_of_bounds", "T_out_of_bounds", "T1_out_of_bounds",
-                  "T2_out_of_bounds")
+                  "T2_out_of_bounds", "oe_not_converged")
 
 
 class ConfigError(ValueError):
@@ -83,7 +84,7 @@ class OnlineConfig:
     refit_period: float = 5.0             # s between refits
     model: str = "nomoto2"
     effects: tuple = ("rudder_offset", "cubic_yaw")
-    method: str = "rwlssvm"
+    method: str = "rwlssvm+oe"
     min_window_length: float = 60.0       # s of data before the first fit
     min_rudder_std: float = float(MIN_RUDDER_STD)  # rad: less rudder activity gives no new estimate
     min_fit_correlation: float = 0.8      # free-run yaw-rate correlation below this is a poor fit

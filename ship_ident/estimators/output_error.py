@@ -66,12 +66,13 @@ class LeastSquaresResult:
 
 
 def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterations: int,
-                                tolerance: float = 1e-8) -> LeastSquaresResult:
+                                tolerance: float = 1e-6) -> LeastSquaresResult:
     """Levenberg-Marquardt with Marquardt's diagonal scaling on the normal equations, bounds by
     projection (a parameter at a bound whose gradient points outward is held there).
 
     The normal equations are (p x p) with p the unknowns, so an iteration costs the
-    Jacobian's simulations and almost nothing else.
+    Jacobian's simulations and almost nothing else. It stops when a step gains less than
+    ``tolerance`` of the cost: far below the chi-square scatter of the cost, 1/sqrt(N).
     """
     x = np.clip(np.asarray(x0, dtype=float), lower, upper)
     f = residual(x)

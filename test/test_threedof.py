@@ -84,7 +84,7 @@ def test_unknown_method_is_refused():
         threedof.identify(_programme(0.0)[:1], DTC.length, DTC.speed, method="tlssvm-magic")
 
 
-def test_training_size_quick_run_improves_with_set_size(tmp_path, capsys):
+def test_training_size_quick_run_improves_with_set_size(tmp_path):
     figure = tmp_path / "taylor.png"
     result = training_size.run(quick=True, progress=lambda message: None, figure=str(figure))
     rows = result["methods"]["tlssvm-gcv"]["rows"]
@@ -94,9 +94,8 @@ def test_training_size_quick_run_improves_with_set_size(tmp_path, capsys):
     assert all(largest[d]["r"] >= smallest[d]["r"] for d in threedof.DOFS)
     assert result["methods"]["tlssvm-gcv"]["plateau_size"] in training_size.QUICK_SIZES
     assert figure.stat().st_size > 10_000
-    training_size.print_table(result)
-    out = capsys.readouterr().out
-    assert "SURGE R" in out and "10000" in out
+    table = training_size.render(result)
+    assert "adding data stops helping" in table and "SURGE R" in table and "10000" in table
 
 
 @pytest.fixture(scope="module")

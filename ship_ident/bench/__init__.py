@@ -3,8 +3,10 @@
 A benchmark is a module in this package that calls ``register`` at import
 with its name, a one-line description, ``run(quick: bool) -> dict`` (a
 JSON-ready result; progress goes to stderr) and ``render(result) -> str``
-(the printed tables). ``benchmarks()`` imports every module here, so adding
-a benchmark means adding one module and nothing else.
+(the printed tables). A benchmark that draws figures registers with
+``plots=True``; its ``run`` then takes ``plot_dir`` (``ship-ident bench NAME
+--plot-dir DIR``). ``benchmarks()`` imports every module here, so adding a
+benchmark means adding one module and nothing else.
 """
 from __future__ import annotations
 
@@ -19,16 +21,18 @@ from typing import Callable
 class Benchmark:
     name: str
     description: str
-    run: Callable[[bool], dict]
+    run: Callable[..., dict]
     render: Callable[[dict], str]
+    plots: bool = False
 
 
 _REGISTRY: dict[str, Benchmark] = {}
 HELPERS = {"crb", "common"}  # modules here that are no benchmark
 
 
-def register(name: str, description: str, run: Callable[[bool], dict], render: Callable[[dict], str]) -> None:
-    _REGISTRY[name] = Benchmark(name, description, run, render)
+def register(name: str, description: str, run: Callable[..., dict], render: Callable[[dict], str],
+             plots: bool = False) -> None:
+    _REGISTRY[name] = Benchmark(name, description, run, render, plots)
 
 
 def benchmarks() -> dict[str, Benchmark]:

@@ -14,11 +14,13 @@ normalised STD (model STD / measured STD), the Taylor-diagram measures.
 """
 from __future__ import annotations
 
-import sys
+
+from pathlib import Path
 
 import numpy as np
 
 from .. import threedof
+from . import progress, register
 
 SIZES = (1200, 1300, 1500, 1700, 2000, 2300, 2900, 4000, 5000, 6000, 7000, 8000, 9000, 10000)
 QUICK_SIZES = (1200, 2900, 10000)
@@ -60,12 +62,12 @@ def plateau_size(rows: list) -> int:
     return int(rows[min(start, len(rows) - 1)]["size"])
 
 
-def _to_stderr(message: str) -> None:
-    print(message, file=sys.stderr)
-
-
-def run(quick: bool = False, progress=_to_stderr, figure: str | None = None) -> dict:
-    """Identify on every training-set size, predict the held-out zigzag; optionally draw the Taylor diagram."""
+def run(quick: bool = False, progress=progress, figure: str | None = None, plot_dir: str | None = None) -> dict:
+    """Identify on every training-set size, predict the held-out zigzag; optionally draw the Taylor
+    diagram to ``figure`` or to ``plot_dir``/taylor_training_size.png."""
+    if plot_dir is not None:
+        Path(plot_dir).mkdir(parents=True, exist_ok=True)
+        figure = str(Path(plot_dir) / "taylor_training_size.png")
     vessel = threedof.VESSELS["dtc"]
     records = [threedof.simulate_manoeuvre(vessel, m, a, duration=d, sample_time=SAMPLE_TIME, seed=i)[0]
                for i, (m, a, d) in enumerate(TRAINING_PROGRAMME)]
@@ -114,10 +116,6 @@ def render(result: dict) -> str:
     return "\n".join(lines)
 
 
-def print_table(result: dict) -> None:
-    print(render(result))
-
-
 def taylor_diagram(result: dict, method: str, path: str) -> None:
     """Polar Taylor diagram: angle arccos(R), radius normalised STD, reference at (0, 1); PNG at ``path``."""
     import matplotlib
@@ -156,3 +154,7 @@ def taylor_diagram(result: dict, method: str, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+register("training-size", "3-DOF prediction quality vs training-set size (seed 000 Table 3, Taylor diagram)",
+         run, render, plots=True)

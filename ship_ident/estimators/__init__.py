@@ -1,14 +1,17 @@
-"""Estimators by name: ``ols``, ``lssvm``, ``rlssvm``, ``rwlssvm``, ``tlssvm``, each optionally ``+oe``."""
+"""Estimators by name: ``ols``, ``lssvm``, ``rlssvm``, ``rwlssvm``, ``tlssvm``, each optionally
+refined by ``+oe`` (output error, multiple shooting) or ``+pem`` (prediction error: the
+free-run error whitened by a Kalman innovation filter that knows the rudder noise)."""
 from __future__ import annotations
 
 from .base import Estimate, Estimator, RegressionEstimator, Solution
 from .lssvm import LSSVM, OLS, RLSSVM
 from .output_error import OutputError
+from .prediction_error import PredictionError
 from .tlssvm import TLSSVM
 from .weighted import RWLSSVM
 
 ESTIMATORS = {cls.name: cls for cls in (OLS, LSSVM, RLSSVM, RWLSSVM, TLSSVM)}
-REFINEMENTS = ("oe",)
+REFINEMENTS = {"oe": OutputError, "pem": PredictionError}
 DEFAULT_METHOD = "rwlssvm+oe"
 
 
@@ -17,19 +20,19 @@ class MethodError(ValueError):
 
 
 def method_names() -> list[str]:
-    return [n for base in ESTIMATORS for n in (base, f"{base}+oe")]
+    return [n for base in ESTIMATORS for n in (base, *(f"{base}+{r}" for r in REFINEMENTS))]
 
 
 def make_estimator(method: str = DEFAULT_METHOD, **options) -> Estimator:
-    """Build an estimator from ``NAME`` or ``NAME+oe``; options go to the base estimator."""
+    """Build an estimator from ``NAME``, ``NAME+oe`` or ``NAME+pem``; options go to the base estimator."""
     base, _, refine = method.partition("+")
     if base not in ESTIMATORS:
         raise MethodError(f"unknown method {method!r}; choose from {', '.join(method_names())}")
     if refine and refine not in REFINEMENTS:
-        raise MethodError(f"unknown refinement {refine!r} in {method!r}; use NAME+oe")
+        raise MethodError(f"unknown refinement {refine!r} in {method!r}; use NAME+oe or NAME+pem")
     estimator = ESTIMATORS[base](**options)
-    return OutputError(estimator) if refine else estimator
+    return REFINEMENTS[refine](estimator) if refine else estimator
 
 
 __all__ = ["Estimate", "Estimator", "RegressionEstimator", "Solution", "ESTIMATORS", "DEFAULT_METHOD",
-           "MethodError", "make_estimator", "method_names", "OutputError"]
+           "MethodError", "make_estimator", "method_names", "OutputError", "PredictionError"]

@@ -145,6 +145,20 @@ class OutputError(Estimator):
         first = self.start.fit(structure, dataset)
         return self.refine(structure, dataset, first)
 
+    def intervals(self, dataset: Dataset) -> tuple:
+        """Shooting intervals: each restarts the free run from its own estimated state."""
+        return shooting_intervals(dataset.segments, int(round(self.shooting_s / dataset.sample_time)))
+
+    @staticmethod
+    def residual_weighting(structure, dataset, params0, s_psi, s_r, intervals):
+        """Map free-run errors to the residual vector: here each scaled by its white-noise level."""
+        return lambda psi_err, r_err: np.concatenate([psi_err / s_psi, r_err / s_r])
+
+    @staticmethod
+    def bandwidth(intervals) -> int:
+        """Newey-West lag window: residuals of different intervals are nearly independent."""
+        return max(b - a for a, b in intervals)
+
     @staticmethod
     def _starts(structure: Structure, names: list, x0: np.ndarray, params0: dict) -> list:
         """The regression's start and a conservative one (effects at their neutral values,
@@ -169,8 +183,9 @@ class OutputError(Estimator):
         h = dataset.sample_time
         s_psi = noise_level(dataset.heading, np.radians(0.01))
         s_r = noise_level(dataset.yaw_rate, np.radians(0.01))
-        intervals = shooting_intervals(dataset.segments, int(round(self.shooting_s / h)))
+        intervals = self.intervals(dataset)
         shots = replace(dataset, segments=intervals)
+        weigh = self.residual_weighting(structure, dataset, params0, s_psi, s_r, intervals)
         n_state = 3 if structure.order == 2 else 2
         bias0 = structure.measured_yaw_rate(np.zeros(1), params0)[0]
         states0 = np.array([[dataset.heading[a], dataset.yaw_rate[a] - bias0, 0.0][:n_state]
@@ -191,8 +206,10 @@ class OutputError(Estimator):
             simulations += 1
             params, initial = unpack(x)
             psi, r = structure.simulate(params, shots, initial=initial, substeps=fit_substeps(h, params))
-            res = np.concatenate([(psi - dataset.heading) / s_psi, (r - dataset.yaw_rate) / s_r])
-            return np.where(np.isfinite(res), res, 1e6)
+            psi_err, r_err = psi - dataset.heading, r - dataset.yaw_rate
+            if not (np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err))):
+                return np.full(2 * dataset.n_samples, 1e6)
+            return weigh(psi_err, r_err)
 
         def jacobian(x, f0):
             """Forward differences: one column per parameter, one grouped pass per state component."""
@@ -220,7 +237,7 @@ class OutputError(Estimator):
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
         params, _ = unpack(result.x)
         std = parameter_std_errors(result.jac, result.fun, dataset.n_samples, p,
-                                   bandwidth=max(b - a for a, b in intervals))
+                                   bandwidth=self.bandwidth(intervals))
         std_errors = {n: float(s) for n, s in zip(names, std)}
         std_errors.update({n: 0.0 for n in structure.fixed_names})
         flags = [f for f in first.flags if not f.endswith("_out_of_bounds") and f != "complex_time_constants"]

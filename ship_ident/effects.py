@@ -157,7 +157,7 @@ class CubicYaw(Effect):
     name = "cubic_yaw"
     explanation = ("the boat's resistance to turning changes in tight turns: yaw damping grows "
                    "(or shrinks) with the cube of the turn rate")
-    parameters = (Parameter("alpha", "s^2/rad^2", "cubic yaw damping coefficient", 0.0, -1e4, 1e4),)
+    parameters = (Parameter("alpha", "s^2/rad^2", "cubic yaw damping coefficient", 0.0, -1e7, 1e7),)
 
     def forcing_terms(self, p):
         return [ForcingTerm(-p["alpha"], r_power=3)]
@@ -295,7 +295,7 @@ class SpeedDependence(Effect):
         return Evidence(abs(c) * np.sqrt(context.effective_samples),
                         f"the error follows rudder times speed change (correlation {c:+.2f}): "
                         "the rudder's effect changes with speed",
-                        feature, "rudder x speed change (rad m/s)")
+                        feature, "rudder x speed change (deg m/s)", np.degrees(1.0))
 
 
 EFFECTS: dict[str, Effect] = {}

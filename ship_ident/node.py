@@ -8,6 +8,10 @@ callbacks never wait for a fit, and a refit still running when the next is
 due is skipped and reported. Outputs: ``~/parameters``
 (Float64MultiArray, names in ``layout.dim[0].label``), ``~/estimate`` (JSON
 String), ``~/predicted_yaw_rate`` (Float64, rad/s) and ``/diagnostics``.
+Once per refit the ROS graph is checked for publishers of another message
+type on the input topics (DDS never delivers those; reported). With
+``log_directory`` set, every accepted estimate is appended to rotated
+JSON-lines files there, so the history survives a restart.
 
 Run: ``identifier_node --ros-args --params-file config/ship_ident.yaml``
 (or ``python -m ship_ident.node``). SIGINT and SIGTERM stop it cleanly.
@@ -19,7 +23,6 @@ import os
 # Each fit solves systems of a few columns: a BLAS thread pool only burns CPU. Set before numpy loads.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import json  # noqa: E402
 import math  # noqa: E402
 import signal  # noqa: E402
 import sys
@@ -38,9 +41,11 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
+from .commands.common import dumps_json
 from .estimators import method_names
-from .io import Sample, imu_samples
-from .online import CONDITION_LEVELS, ConfigError, OnlineConfig, OnlineIdentifier
+from .io import FLOAT64, IMU, Sample, imu_samples
+from .online import (CONDITION_LEVELS, MAX_WINDOW_SAMPLES, ConfigError, EstimateLog, OnlineConfig,
+                     OnlineIdentifier)
 
 NODE_NAME = "ship_ident"
 TICKS_PER_REFIT = 5   # the schedule is checked this many times per refit period
@@ -67,13 +72,19 @@ PARAMETER_DOCS = {
     "stale_timeout": ("s without a sample before an input is reported stale", (0.01, 3600.0), False),
     "gap_threshold": ("s without a sample that splits the window into segments", (0.01, 3600.0), False),
     "clock_jump_threshold": ("s; a clock step back this large resets the window", (0.01, 3600.0), False),
-    "max_window_samples": ("hard bound on stored samples per input", (100, 10_000_000), False),
+    "max_window_samples": ("hard bound on stored samples per input (about 110 bytes each)",
+                           (100, MAX_WINDOW_SAMPLES), False),
     "prediction_horizon": ("s of free run from the measured state behind ~/predicted_yaw_rate",
                            (0.1, 3600.0), False),
     "qos_reliability": ("input QoS reliability: best_effort (sensor data) or reliable", None, True),
     "qos_depth": ("input QoS history depth (messages kept per topic)", (1, 10000), True),
+    "log_directory": ("directory of the JSON-lines estimate log (estimates.jsonl, rotated); "
+                      "empty: no log", None, True),
+    "log_max_bytes": ("size in bytes at which the estimate log is rotated", (1000, 10**9), True),
+    "log_backups": ("rotated estimate log files kept (estimates.jsonl.1 ...)", (0, 1000), True),
 }
-QOS_DEFAULTS = {"qos_reliability": "best_effort", "qos_depth": 100}
+NODE_DEFAULTS = {"qos_reliability": "best_effort", "qos_depth": 100,
+                 "log_directory": "", "log_max_bytes": 10_000_000, "log_backups": 5}
 RELIABILITY = {"best_effort": ReliabilityPolicy.BEST_EFFORT, "reliable": ReliabilityPolicy.RELIABLE}
 CONFIG_NAMES = [f.name for f in fields(OnlineConfig)]
 DIAGNOSTIC_LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
@@ -97,7 +108,7 @@ class IdentifierNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        defaults = dict(OnlineConfig().to_json(), **QOS_DEFAULTS)
+        defaults = dict(OnlineConfig().to_json(), **NODE_DEFAULTS)
         for name, value in defaults.items():
             self.declare_parameter(name, value, _descriptor(name, value))
         self.identifier = OnlineIdentifier(self._config_from_parameters())  # ConfigError on bad values
@@ -106,7 +117,10 @@ class IdentifierNode(Node):
             raise ConfigError(f"qos_reliability must be best_effort or reliable, got {reliability!r}")
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.get_parameter("qos_depth").value,
                          reliability=RELIABILITY[reliability])
-        self._subscribe(self.identifier.config, qos)
+        self._expected_types = self._subscribe(self.identifier.config, qos)
+        directory = self.get_parameter("log_directory").value
+        self.estimate_log = EstimateLog(directory, self.get_parameter("log_max_bytes").value,
+                                        self.get_parameter("log_backups").value) if directory else None
         self.parameters_pub = self.create_publisher(Float64MultiArray, "~/parameters", 10)
         self.estimate_pub = self.create_publisher(String, "~/estimate", 10)
         self.predicted_pub = self.create_publisher(Float64, "~/predicted_yaw_rate", 10)
@@ -116,6 +130,7 @@ class IdentifierNode(Node):
         self._overruns = 0              # refits skipped since the last published record
         self._overrun_lock = threading.Lock()
         self._callback_errors = 0
+        self._type_problems = ""        # sentence about wrong-type publishers on the inputs, if any
         self._timer = None
         self._start_timer(self.identifier.config.refit_period)
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -160,16 +175,32 @@ class IdentifierNode(Node):
         self._timer = self.create_timer(refit_period / TICKS_PER_REFIT, self._on_tick)
 
     # --- inputs ----------------------------------------------------------
-    def _subscribe(self, config: OnlineConfig, qos: QoSProfile) -> None:
+    def _subscribe(self, config: OnlineConfig, qos: QoSProfile) -> dict:
+        """Subscribe to the inputs; return {fully qualified topic: expected message type}."""
         roles = {"rudder": config.rudder_topic, "speed": config.speed_topic}
+        expected = {}
         if config.imu_topic:
-            self.create_subscription(Imu, config.imu_topic, self._on_imu, qos)
+            subscription = self.create_subscription(Imu, config.imu_topic, self._on_imu, qos)
+            expected[subscription.topic_name] = IMU
         else:
             roles.update(heading=config.heading_topic, yaw_rate=config.yaw_rate_topic)
         for role, topic in roles.items():
             if topic:
-                self.create_subscription(Float64, topic,
-                                         lambda msg, role=role: self._on_value(role, msg.data), qos)
+                subscription = self.create_subscription(
+                    Float64, topic, lambda msg, role=role: self._on_value(role, msg.data), qos)
+                expected[subscription.topic_name] = FLOAT64
+        return expected
+
+    def _check_topic_types(self) -> str:
+        """A sentence naming input topics that also carry another message type ('' when none)."""
+        graph = dict(self.get_topic_names_and_types())
+        wrong = [f"{topic} carries {', '.join(t for t in graph[topic] if t != expected)} "
+                 f"(expected {expected})" for topic, expected in self._expected_types.items()
+                 if any(t != expected for t in graph.get(topic, ()))]
+        if not wrong:
+            return ""
+        return ("; ".join(wrong) + ": those messages are never received; fix the publisher "
+                "or remap the topic")
 
     def _now(self) -> float:
         """Node clock time in s (simulated time when use_sim_time is set)."""
@@ -203,6 +234,10 @@ class IdentifierNode(Node):
             with self._overrun_lock:
                 self._overruns += 1
             return
+        try:
+            self._type_problems = self._check_topic_types()
+        except Exception as exc:  # a graph query must never stop the node
+            self._report_callback_error(exc)
         self._running = self._worker.submit(self._refit, now)
 
     def _refit(self, now: float) -> None:
@@ -215,6 +250,15 @@ class IdentifierNode(Node):
                 record.conditions["refit_overran"] = (
                     f"{overruns} refit(s) skipped: the previous refit was still running; "
                     "raise refit_period or choose a faster method")
+            if self._type_problems:
+                record.conditions["wrong_message_type"] = self._type_problems
+            if record.new_estimate and self.estimate_log is not None:
+                try:
+                    self.estimate_log.write(record.to_json())
+                except OSError as exc:
+                    record.conditions["estimate_log_failed"] = (
+                        f"cannot append to {self.estimate_log.path}: {exc.strerror or exc}; "
+                        "estimates are published but not logged")
             self._publish(record)
         except Exception as exc:
             self.get_logger().error(f"refit failed: {type(exc).__name__}: {exc}")
@@ -223,9 +267,9 @@ class IdentifierNode(Node):
     def _publish(self, record) -> None:
         data = record.to_json()
         estimate_msg = String()
-        estimate_msg.data = json.dumps(data)
+        estimate_msg.data = dumps_json(data)
         self.estimate_pub.publish(estimate_msg)
-        if data["parameters"]:
+        if data["parameters"] and all(math.isfinite(v) for v in data["parameters"].values()):
             names = list(data["parameters"])
             msg = Float64MultiArray()
             msg.layout.dim = [MultiArrayDimension(label=",".join(names), size=len(names), stride=len(names))]

@@ -11,8 +11,9 @@ files, so the node and replay run the very same code.
 Each refit returns a ``RefitRecord``: the estimate in force (a new one, or
 the last good one when this window could not give one), the window it came
 from, the model's predicted yaw rate at the window end, and the conditions
-found (no data, stale input, gap, too little excitation, poor fit, ...), each
-with a severity OK / WARN / ERROR and a sentence.
+found (no data, stale input, gap, too little excitation, poor fit, implausible
+units or signs, ...), each with a severity OK / WARN / ERROR and a sentence.
+``EstimateLog`` keeps the accepted estimates as rotated JSON-lines files.
 """
 from __future__ import annotations
 
@@ -21,9 +22,11 @@ import threading
 import time as wallclock
 from collections import deque
 from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
 
 import numpy as np
 
+from .commands.common import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import MethodError, make_estimator
 from .estimators.base import MIN_RUDDER_STD
@@ -55,7 +58,28 @@ CONDITION_LEVELS = {
     "refit_overran": WARN,
     "rejected_samples": WARN,
     "clock_jump": WARN,
+    "window_truncated": WARN,
+    "heading_in_degrees": WARN,
+    "yaw_rate_sign": WARN,
+    "rudder_saturated": WARN,
+    "wrong_message_type": WARN,     # reported by the node (ROS graph)
+    "estimate_log_failed": WARN,    # reported by the node
 }
+
+# A stored sample costs about 110 bytes (a tuple of two floats in a deque): one million per input,
+# four inputs, is about 0.4 GB, the most a vessel computer should give to the window.
+MAX_WINDOW_SAMPLES = 1_000_000
+
+# Plausibility of heading against yaw rate: the heading change over intervals of HEADING_BASELINE
+# is regressed on the integrated yaw rate; the slope is 1 when both are rad and NED.
+HEADING_BASELINE = 1.0              # s
+MIN_TURN_RATE_STD = math.radians(0.5)  # rad/s: with less turning the slope says nothing
+DEGREES_SLOPE = 10.0                # slope beyond this: heading in degrees (57.3)
+DEGREE_WRAP = (300.0, 420.0)        # a heading step this large is a wrap at 360 (degrees)
+# Rudder saturation: a single extreme value held (within SATURATION_TOLERANCE) for this share.
+SATURATION_SHARE = 0.5
+SATURATION_TOLERANCE = math.radians(0.5)  # rad
+SATURATION_MIN_ANGLE = math.radians(5.0)  # rad: holding smaller angles is not saturation
 
 REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
 
@@ -90,7 +114,8 @@ class OnlineConfig:
     min_fit_correlation: float = 0.8      # free-run yaw-rate correlation below this is a poor fit
     stale_timeout: float = 1.0            # s without a sample on an input before it is stale
     gap_threshold: float = 0.5            # s without a sample that splits the window
-    clock_jump_threshold: float = 1.0     # s: a stamp this far back is a clock jump (window reset)
+    clock_jump_threshold: float = 1.0     # s: a stamp this far back is a clock jump (window reset);
+                                          # forward, a step beyond max(this, refit_period) is one
     max_window_samples: int = 20000       # hard bound on stored samples per input
     prediction_horizon: float = 10.0      # s of free run behind the predicted yaw rate
 
@@ -124,6 +149,10 @@ class OnlineConfig:
         if not 0 <= self.min_fit_correlation <= 1:
             raise ConfigError(f"min_fit_correlation must be in [0, 1], got {self.min_fit_correlation}")
         needed = int(math.ceil(self.window_length / self.sample_time))
+        if self.max_window_samples > MAX_WINDOW_SAMPLES:
+            raise ConfigError(f"max_window_samples {self.max_window_samples} would take about "
+                              f"{4 * 110 * self.max_window_samples / 1e9:.1f} GB for four inputs; "
+                              f"use <= {MAX_WINDOW_SAMPLES}")
         if self.max_window_samples < max(needed, 100):
             raise ConfigError(f"max_window_samples {self.max_window_samples} cannot hold a "
                               f"{self.window_length} s window at {self.sample_time} s "
@@ -269,17 +298,27 @@ class OnlineIdentifier:
         return "accepted"
 
     def _observe_clock(self, now: float) -> None:
-        """A clock reading far behind the newest time seen is a jump back: reset window and schedule."""
-        if now < self._latest_time - self._config.clock_jump_threshold:
-            self._last_jump = self._latest_time - now
-            self.counts["clock_jumps"] += 1
+        """Clock jumps restart the schedule from ``now``.
+
+        A reading far behind the newest time seen (bag loop, simulator restart)
+        also empties the window. A step forward by more than one refit period
+        (the node looks at its clock several times per period; replay at every
+        sample) is a jump forward, or every input fell silent: the window keeps
+        what is still inside ``window_length``.
+        """
+        config = self._config
+        if now < self._latest_time - config.clock_jump_threshold:
             for role in ROLES:
                 self._window[role].clear()
                 self._newest[role] = -math.inf
-            self._latest_time = now
-            self._next_due = now + self._config.refit_period
-        else:
+        elif not now > self._latest_time + max(config.clock_jump_threshold, config.refit_period) \
+                or self._latest_time == -math.inf:
             self._latest_time = max(self._latest_time, now)
+            return
+        self._last_jump = now - self._latest_time
+        self.counts["clock_jumps"] += 1
+        self._latest_time = now
+        self._next_due = now + config.refit_period
 
     # --- schedule --------------------------------------------------------
     def due(self, now: float) -> bool:
@@ -307,13 +346,14 @@ class OnlineIdentifier:
         """Fit the window as it is at clock time ``now`` (s) and advance the schedule."""
         started = wallclock.perf_counter()
         with self._lock:
-            self._observe_clock(now)
             self._advance_schedule(now)
+            self._observe_clock(now)   # after: a clock jump restarts the schedule from now
             config = self._config
             for role in ROLES:
                 self._prune(self._window[role], now - config.window_length)
             series = {role: np.array(self._window[role], dtype=float).reshape(-1, 2)
                       for role in ROLES}
+            full = [role for role in ROLES if len(self._window[role]) == config.max_window_samples]
             newest = dict(self._newest)
             counts = dict(self.counts)
             fresh = {k: counts[k] - self._reported[k] for k in counts}
@@ -321,6 +361,8 @@ class OnlineIdentifier:
             last_good, last_window = self._last_good, self._last_good_window
             last_jump = self._last_jump
         conditions = self._input_conditions(config, series, newest, now, fresh, last_jump)
+        conditions.update(_truncation(config, series, full, now))
+        conditions.update(_heading_plausibility(series))
         record = RefitRecord(time=now, conditions=conditions, counts=counts)
         if "no_data" not in conditions and "window_filling" not in conditions:
             self._fit(config, series, last_good, record)
@@ -355,9 +397,13 @@ class OnlineIdentifier:
         if rejected:
             conditions["rejected_samples"] = "rejected since last refit: " + ", ".join(
                 f"{n} {k.replace('_', '-')}" for k, n in rejected.items())
-        if fresh["clock_jumps"]:
-            conditions["clock_jump"] = (f"clock jumped back {last_jump:.1f} s; "
+        if fresh["clock_jumps"] and last_jump < 0:
+            conditions["clock_jump"] = (f"clock jumped back {-last_jump:.1f} s; "
                                         "window and schedule were reset")
+        elif fresh["clock_jumps"]:
+            conditions["clock_jump"] = (f"clock jumped forward {last_jump:.1f} s (or every input "
+                                        "fell silent); schedule restarted, the window keeps only "
+                                        f"the last {config.window_length:g} s")
         return conditions
 
     def _fit(self, config: OnlineConfig, series: dict, last_good, record: RefitRecord) -> None:
@@ -373,6 +419,7 @@ class OnlineIdentifier:
             longest = max(b - a for a, b in dataset.gaps)
             record.conditions["gap_in_window"] = (f"{len(dataset.gaps)} gap(s) in the window, longest "
                                                   f"{longest:.1f} s; fitting the segments apart")
+        record.conditions.update(_rudder_saturation(dataset.rudder))
         rudder_std = float(np.std(dataset.rudder))
         if rudder_std < config.min_rudder_std:
             record.conditions["too_little_excitation"] = (
@@ -427,6 +474,118 @@ class OnlineIdentifier:
         except (DataError, StructureError, ValueError):
             return math.nan, float(dataset.yaw_rate[-1])
         return float(r[-1]), float(dataset.yaw_rate[-1])
+
+
+def _truncation(config: OnlineConfig, series: dict, full: list, now: float) -> dict:
+    """The sample bound cut an input's window short of ``window_length``."""
+    short = [f"{role} ({now - series[role][0, 0]:.0f} s)" for role in full
+             if len(series[role]) and series[role][0, 0] > now - config.window_length + config.sample_time]
+    if not short:
+        return {}
+    return {"window_truncated": (f"max_window_samples ({config.max_window_samples}) holds less than "
+                                 f"the {config.window_length:g} s window of {', '.join(short)}: the "
+                                 "input is faster than planned; raise max_window_samples or shorten "
+                                 "window_length")}
+
+
+def _heading_plausibility(series: dict) -> dict:
+    """Heading in degrees, or heading and yaw rate of opposite sign conventions.
+
+    The heading's change over ``HEADING_BASELINE`` intervals is regressed on
+    the yaw rate integrated over the same intervals: the slope is 1 for rad
+    and NED on both, 57.3 for a heading in degrees, -1 for a yaw rate of the
+    other sign (ENU, counter-clockwise positive). Heading steps of about 360
+    (wraps in degrees) also give degrees away when the boat hardly turns.
+    """
+    heading, yaw_rate = series["heading"], series["yaw_rate"]
+    if len(heading) < 10 or len(yaw_rate) < 10:
+        return {}
+    steps = np.abs(np.diff(heading[:, 1]))
+    degree_wraps = int(np.count_nonzero((steps > DEGREE_WRAP[0]) & (steps < DEGREE_WRAP[1])))
+    t = heading[:, 0]
+    stride = max(1, int(round(HEADING_BASELINE / max(float(np.median(np.diff(t))), 1e-6))))
+    t, psi = t[::stride], np.unwrap(heading[:, 1])[::stride]
+    inside = (t >= yaw_rate[0, 0]) & (t <= yaw_rate[-1, 0])
+    t, psi = t[inside], psi[inside]
+    slope = correlation = math.nan
+    if len(t) >= 10:
+        turned = np.diff(_integral_at(yaw_rate[:, 0], yaw_rate[:, 1], t))
+        changed = np.diff(psi)
+        if np.std(turned / np.diff(t)) >= MIN_TURN_RATE_STD:
+            slope = float(np.dot(changed, turned) / np.dot(turned, turned))
+            correlation = float(np.corrcoef(changed, turned)[0, 1])
+    if abs(slope) > DEGREES_SLOPE or degree_wraps:
+        evidence = (f"it changes {abs(slope):.0f}x as fast as the yaw rate turns the boat"
+                    if abs(slope) > DEGREES_SLOPE else f"it steps by about 360 {degree_wraps} time(s)")
+        return {"heading_in_degrees": (f"the heading looks like degrees, not rad ({evidence}); "
+                                       "publish it in rad: heading-based fit figures are wrong "
+                                       "until then")}
+    if slope < -0.5 and correlation < -0.5:
+        return {"yaw_rate_sign": (f"heading and yaw rate turn opposite ways (correlation "
+                                  f"{correlation:.2f}): one of them is counter-clockwise positive "
+                                  "(ENU); negate the yaw rate (or heading) to NED, or use imu_topic "
+                                  "for an Imu")}
+    return {}
+
+
+def _integral_at(time: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Trapezoidal integral of ``values`` over ``time`` from its start, at the times ``at``."""
+    cumulative = np.concatenate([[0.0], np.cumsum(np.diff(time) * (values[1:] + values[:-1]) / 2)])
+    return np.interp(at, time, cumulative)
+
+
+def _rudder_saturation(rudder: np.ndarray) -> dict:
+    """One extreme rudder angle held for most of the window: saturated (or stuck) rudder."""
+    for extreme in (np.percentile(rudder, 99.5), np.percentile(rudder, 0.5)):
+        share = float(np.mean(np.abs(rudder - extreme) <= SATURATION_TOLERANCE))
+        if abs(extreme) >= SATURATION_MIN_ANGLE and share >= SATURATION_SHARE:
+            return {"rudder_saturated": (f"rudder held at {math.degrees(extreme):+.1f} deg for "
+                                         f"{100 * share:.0f} % of the window (saturated or stuck): "
+                                         "the fit rests on the remaining samples")}
+    return {}
+
+
+class EstimateLog:
+    """Accepted estimates as JSON lines in ``directory/estimates.jsonl``, rotated by size.
+
+    A line that would take the file past ``max_bytes`` first moves it to
+    ``estimates.jsonl.1`` (older files shift to ``.2`` ... up to ``backups``;
+    the oldest is deleted). Each line is written and flushed at once and the
+    file is appended to across restarts, so a trip's history survives them.
+    """
+
+    FILE_NAME = "estimates.jsonl"
+
+    def __init__(self, directory, max_bytes: int = 10_000_000, backups: int = 5):
+        if max_bytes < 1000 or backups < 0:
+            raise ConfigError(f"log_max_bytes must be >= 1000 and log_backups >= 0, got "
+                              f"{max_bytes} and {backups}")
+        self.path = Path(directory) / self.FILE_NAME
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            with self.path.open("ab"):
+                pass
+        except OSError as exc:
+            raise ConfigError(f"cannot write the estimate log {self.path}: {exc.strerror or exc}; "
+                              "choose another log_directory") from None
+        self.max_bytes, self.backups = max_bytes, backups
+
+    def write(self, record: dict) -> None:
+        """Append one record (strict JSON, NaN as null); raises OSError when the disk refuses."""
+        line = (dumps_json(record) + "\n").encode()
+        size = self.path.stat().st_size if self.path.exists() else 0
+        if size and size + len(line) > self.max_bytes:
+            self._rotate()
+        with self.path.open("ab") as f:
+            f.write(line)
+
+    def _rotate(self) -> None:
+        name = self.path.name
+        for k in range(self.backups, 0, -1):
+            older = self.path if k == 1 else self.path.with_name(f"{name}.{k - 1}")
+            if older.exists():
+                older.replace(self.path.with_name(f"{name}.{k}"))
+        self.path.unlink(missing_ok=True)
 
 
 def run_schedule(identifier: OnlineIdentifier, samples):

@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .diagnose import Diagnosis, signal_table  # noqa: E402
+from .diagnose import Diagnosis, covered, signal_table  # noqa: E402
 
 DEG = np.degrees(1.0)
 DPI = 80
@@ -23,26 +23,36 @@ def _save(fig, directory: Path, name: str) -> str:
     return name
 
 
+def _segments_plot(ax, dataset, values, label, **style):
+    """One line per segment (no line drawn across the gaps between a split's windows)."""
+    for k, (a, b) in enumerate(dataset.segments):
+        ax.plot(dataset.time[a:b], values[a:b], label=label if k == 0 else None, **style)
+
+
 def plot_measured_vs_model(d: Diagnosis, directory: Path) -> str:
-    """Measured and free-run heading and yaw rate, training and held-out, worst segments shaded."""
+    """Measured and free-run heading and yaw rate, held-out windows and worst segments shaded."""
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     train_psi, train_r = d.structure.simulate(d.estimate.parameters, d.training)
     for ax, scale, label, measured, train, held in (
             (axes[0], DEG, "heading (deg)", "heading", train_psi, d.run.heading),
             (axes[1], DEG, "yaw rate (deg/s)", "yaw_rate", train_r, d.run.yaw_rate)):
+        for k, (a, b) in enumerate(d.held_out.segments):
+            ax.axvspan(d.held_out.time[a], d.held_out.time[b - 1], color="tab:blue", alpha=0.08, lw=0,
+                       label="held-out window" if k == 0 else None)
+        for k, seg in enumerate(d.worst_segments):
+            ax.axvspan(seg["start"], seg["end"], ymin=0.0, ymax=0.04, color="tab:orange", alpha=0.9, lw=0,
+                       label=f"worst {len(d.worst_segments)} segments" if k == 0 else None)
         ax.plot(d.dataset.time, getattr(d.dataset, measured) * scale, color="black", lw=0.8, label="measured")
-        ax.plot(d.training.time, train * scale, color="tab:gray", lw=0.9, label="model, training (in-sample)")
-        ax.plot(d.held_out.time, held * scale, color="tab:blue", lw=1.0, label="model, held-out free run")
+        _segments_plot(ax, d.training, train * scale, "model, fitting part (in-sample)",
+                       color="tab:gray", lw=0.9)
+        _segments_plot(ax, d.held_out, held * scale, "model, held-out free run", color="tab:blue", lw=1.2)
         if d.before_run is not None:
-            ax.plot(d.held_out.time, getattr(d.before_run, measured) * scale, color="tab:red", lw=0.8,
-                    ls="--", label=f"before: {d.before.structure.label()}")
-        for seg in d.worst_segments:
-            ax.axvspan(seg["start"], seg["end"], color="tab:orange", alpha=0.2)
-        ax.axvline(d.held_out.time[0], color="tab:green", ls=":")
+            _segments_plot(ax, d.held_out, getattr(d.before_run, measured) * scale,
+                           f"before: {d.before.structure.label()}", color="tab:red", lw=0.8, ls="--")
         ax.set_ylabel(label)
-    axes[0].legend(fontsize=7, loc="best")
-    axes[0].set_title(f"{d.structure.label()}: free run (held-out windows start from the measured state); "
-                      "shaded: worst segments", fontsize=9)
+    axes[0].legend(fontsize=7, loc="best", ncol=2)
+    axes[0].set_title(f"{d.structure.label()}: free runs, each window from the measured state "
+                      "(orange ticks: worst segments)", fontsize=9)
     axes[1].set_xlabel("time (s)")
     return _save(fig, directory, "measured_vs_model.png")
 
@@ -85,7 +95,11 @@ def plot_correlations(d: Diagnosis, directory: Path) -> str:
         ax.axhspan(-t["bound"], t["bound"], color="tab:green", alpha=0.2, label="95 % bounds")
         ax.axhline(0, color="black", lw=0.5)
         ax.set_xlabel("lag (s)")
+        ax.set_ylabel("normalised correlation (-)", fontsize=8)
         ax.set_title(title, fontsize=9)
+    if not np.any(t["cross_correlation_rudder"]):
+        axes[1].text(0.5, 0.5, "rudder constant in the held-out windows:\nno cross-correlation to show",
+                     transform=axes[1].transAxes, ha="center", fontsize=8)
     axes[0].legend(fontsize=7)
     return _save(fig, directory, "correlations.png")
 
@@ -114,7 +128,12 @@ def plot_taylor(d: Diagnosis, directory: Path) -> str:
             y = e * np.sin(np.linspace(0, np.pi, 100))
             ax.plot(np.arctan2(y, x), np.hypot(x, y), color="tab:gray", lw=0.5, ls=":")
         ax.plot(grid, np.ones_like(grid), color="black", lw=0.5)
-        ax.set_title(f"{signal.replace('_', ' ')}: angle = arccos R, radius = STD ratio, dotted: E'",
+        ticks = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 0.95, 0.99])
+        ax.set_thetagrids(np.degrees(np.arccos(ticks)), [f"{t:g}" for t in ticks], fontsize=7)
+        ax.text(np.radians(52), ax.get_rmax() * 1.12, "correlation R", fontsize=8, rotation=-38,
+                ha="center", va="center")
+        ax.set_xlabel("STD ratio (model / measured)", fontsize=8, labelpad=14)
+        ax.set_title(f"{signal.replace('_', ' ')} (held-out free runs); dotted arcs: E' = 0.25, 0.5, 1",
                      fontsize=8)
     axes[1].legend(fontsize=6, loc="upper right", bbox_to_anchor=(1.35, 1.0))
     return _save(fig, directory, "taylor.png")
@@ -207,7 +226,7 @@ def write_report(d: Diagnosis, directory, source: str = "") -> Path:
 <style>body{{font-family:sans-serif;max-width:1000px;margin:auto}} table{{border-collapse:collapse;font-size:13px}}
 td,th{{border:1px solid #ccc;padding:2px 6px}} img{{max-width:100%}}</style></head><body>
 <h1>Diagnosis of {html.escape(d.structure.label())}</h1>
-<p>Data: {html.escape(source)}. Fitted on {d.training.duration:.0f} s, run free on {d.held_out.duration:.0f} s
+<p>Data: {html.escape(source)}. Fitted on {covered(d.training):.0f} s, run free on {covered(d.held_out):.0f} s
 held out ({len(d.held_out.segments)} free runs, each from the measured heading and yaw rate).
 All figures are free-run figures. Yaw-rate noise floor {d.noise['yaw_rate'] * DEG:.3g} deg/s.</p>
 <p><b>Verdict: {d.verdict}</b></p>

@@ -122,15 +122,7 @@ class Structure:
         h = dataset.sample_time
         time_constants = [params["T"]] if self.order == 1 else [params["T1"], params["T2"]]
         substeps = substeps or substeps_for(h, min(time_constants))
-        rudder = dataset.rudder
-        for effect in self.effects:
-            rudder = effect.effective_rudder(dataset.time, rudder, params)
-        gain = np.ones(dataset.n_samples)
-        tscale = np.ones(dataset.n_samples)
-        for effect in self.effects:
-            scales = effect.speed_scales(dataset.speed, params) if dataset.speed is not None else None
-            if scales is not None:
-                gain, tscale = gain * scales[0], tscale * scales[1]
+        rudder, gain, tscale = self.effective_inputs(params, dataset.time, dataset.rudder, dataset.speed)
         terms = [t for e in self.effects for t in e.forcing_terms(params)]
         coef = np.array([t.coefficient for t in terms], dtype=float)
         ints = [np.array([getattr(t, f) for t in terms], dtype=np.int64)
@@ -150,6 +142,20 @@ class Structure:
                                      K, T1, T2, T3, psi0, r0, rdot0, coef, *ints, substeps)
             psi_out[a:b], r_out[a:b] = psi, r
         return psi_out, self.measured_yaw_rate(r_out, params)
+
+    def effective_inputs(self, params: dict, time: np.ndarray, rudder: np.ndarray,
+                         speed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rudder angle acting on the hull (rad) and the per-sample multipliers of K and of
+        the time constants, after every effect's rudder and speed hooks."""
+        for effect in self.effects:
+            rudder = effect.effective_rudder(time, rudder, params)
+        gain = np.ones(len(time))
+        time_scale = np.ones(len(time))
+        for effect in self.effects:
+            scales = effect.speed_scales(speed, params) if speed is not None else None
+            if scales is not None:
+                gain, time_scale = gain * scales[0], time_scale * scales[1]
+        return rudder, gain, time_scale
 
     def measured_yaw_rate(self, r: np.ndarray, params: dict) -> np.ndarray:
         for effect in self.effects:

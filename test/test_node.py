@@ -197,3 +197,39 @@ def test_node_stops_on_sigterm(env):
     time.sleep(2.0)
     node.terminate()
     assert node.wait(timeout=5) == 0
+
+
+def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id, tmp_path):
+    """A String publisher on /usv/rudder next to the real one; the JSON-lines estimate log."""
+    from std_msgs.msg import String
+
+    d = simulate("mixed", duration=100.0, seed=7).dataset
+    node = node_process(env, "refit_period:=2.0", "window_length:=30.0", "min_window_length:=10.0",
+                        f"log_directory:={tmp_path / 'estimates'}")
+    listener = Listener(domain_id)
+    player = Player(listener.node)
+    other = Listener(domain_id, node_name="other")  # a second participant: one type per topic in each
+    wrong = other.node.create_publisher(String, "/usv/rudder", 10)
+    try:
+        assert player.wait_for_subscribers(20.0)
+        for i in range(len(d.time)):
+            player.publish_clock(float(d.time[i]))
+            for role in ("rudder", "heading", "yaw_rate"):
+                player.publish(role, getattr(d, role)[i])
+            if i % 10 == 0:
+                wrong.publish(String(data="hard to port"))
+            listener.spin(0.005)
+        listener.spin(1.0)
+        assert node.poll() is None
+    finally:
+        code, log, _ = stop(node)
+        listener.close()
+        other.close()
+    assert code == 0, log
+    sentences = [kv.value for s in listener.diagnostics for kv in s.values
+                 if kv.key == "condition/wrong_message_type"]
+    assert sentences and "/usv/rudder carries std_msgs/msg/String" in sentences[-1]
+    published = [e for e in listener.estimates if e["new_estimate"]]
+    logged = [json.loads(line) for line in (tmp_path / "estimates" / "estimates.jsonl").read_text().splitlines()]
+    assert len(published) >= 5 and all(e["new_estimate"] for e in logged)
+    assert [e["stamp"] for e in logged][-len(published):] == [e["stamp"] for e in published]

@@ -1,12 +1,16 @@
 """ship-ident replay: a simulated bag through the online identifier, JSON lines and the --out MCAP."""
 import json
+import signal
 import subprocess
 import sys
 
 import pytest
 from rosbags.highlevel import AnyReader
 
-from ship_ident.io import typestore, write_simulation
+from ship_ident.commands.replay import replay_bag
+from ship_ident.demo import BAG as DEMO_BAG
+from ship_ident.io import Topics, typestore, write_simulation
+from ship_ident.online import OnlineConfig
 from ship_ident.simulator import simulate
 
 
@@ -69,3 +73,41 @@ def test_replay_bad_input_is_one_line(bag, args, message):
     result = replay(*[a.format(bag=bag[0]) for a in args])
     assert result.returncode == 2
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def estimates_in(path) -> list[dict]:
+    with AnyReader([path], default_typestore=typestore()) as reader:
+        connections = [c for c in reader.connections if c.topic == "/ship_ident/estimate"]
+        return [json.loads(reader.deserialize(raw, c.msgtype).data)
+                for c, _, raw in reader.messages(connections)]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_interrupted_replay_leaves_a_readable_mcap_with_every_estimate(tmp_path, signum):
+    out = tmp_path / "partial.mcap"
+    process = subprocess.Popen([sys.executable, "-m", "ship_ident.cli", "replay", str(DEMO_BAG), "--json",
+                                "--out", str(out), "--refit-period", "1.0"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        printed = [json.loads(process.stdout.readline()) for _ in range(20)]
+        process.send_signal(signum)
+        rest, err = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    printed += [json.loads(line) for line in rest.splitlines()]
+    assert process.returncode == 128 + signum, err
+    assert "interrupted at bag time" in err and len(err.strip().splitlines()) == 1
+    written = estimates_in(out)
+    assert 20 <= len(printed) == len(written) < 600  # stopped early, nothing printed is missing
+    assert [e["stamp"] for e in written] == [e["stamp"] for e in printed]
+
+
+def test_replay_bag_is_callable_per_bag(bag):
+    """The per-bag function that ``ship-ident replay`` (and many-bag replay) runs."""
+    path, truth = bag
+    config = OnlineConfig(method="rwlssvm", refit_period=20.0, speed_topic="/usv/speed")
+    result = replay_bag(path, Topics(), config)
+    assert not result.interrupted and result.duration == pytest.approx(300.0)
+    assert [r.time for r in result.records] == pytest.approx([20.0 * k for k in range(1, 15)])
+    assert result.records[-1].estimate["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)

@@ -5,7 +5,7 @@ import math
 import sys
 import time
 
-from ..diagnose import DEFAULT_METHOD, diagnose
+from ..diagnose import DEFAULT_METHOD, covered, diagnose
 from ..structure import parse_effects, require_samples
 from .common import add_data_args, add_json_arg, add_model_args, dumps_json, load_data
 
@@ -22,6 +22,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("data", metavar="DATA", help="rosbag2 directory, .mcap file or CSV file")
     add_model_args(parser)
     parser.set_defaults(method=DEFAULT_METHOD)
+    parser.add_argument("--validate", metavar="OTHER",
+                        help="hold out this other recording (bag or CSV) instead of the tail of DATA, "
+                             "and fit on all of DATA: cross-manoeuvre validation")
     parser.add_argument("--report", metavar="DIR", help="write an HTML report with plots to DIR/index.html")
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="processes for the candidate refits (default: CPU count)")
@@ -38,8 +41,9 @@ def run(args) -> int:
 
     dataset = load_data(args, args.data)
     require_samples(dataset)
+    validation = load_data(args, args.validate) if args.validate else None
     result = diagnose(dataset, args.model, parse_effects(args.effects), args.method,
-                      progress=progress, workers=args.workers)
+                      progress=progress, workers=args.workers, validation=validation)
     if args.report:
         from ..report import write_report
         progress(f"writing the report to {args.report}")
@@ -53,8 +57,8 @@ def run(args) -> int:
 def format_diagnosis(result, source) -> str:
     """Readable summary: held-out fit, before/after, worst segments, residual tests, candidates."""
     fit = result.run.fit
-    lines = [f"{result.structure.label()} fitted on {result.training.duration:.0f} s of {source}, "
-             f"run free on {result.held_out.duration:.0f} s held out "
+    lines = [f"{result.structure.label()} fitted on {covered(result.training):.0f} s of {source}, "
+             f"run free on {covered(result.held_out):.0f} s held out "
              f"({len(result.held_out.segments)} free runs from the measured state)",
              f"  held-out free-run: heading RMSE {fit['rmse_heading'] * DEG:.3g} deg "
              f"(fit {fit['fit_percent_heading']:.1f} %), yaw rate RMSE {fit['rmse_yaw_rate'] * DEG:.3g} deg/s "

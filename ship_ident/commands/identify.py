@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..errors import CommandError
 from ..estimators import make_estimator
-from ..estimators.base import MIN_RUDDER_STD, MIN_YAW_RATE_STD, excitation
+from ..estimators.base import excitation_shortfall
 from ..structure import require_samples
 from .common import (add_data_args, add_json_arg, add_model_args, dumps_json, load_data,
                      structure_from_args)
@@ -42,13 +42,9 @@ def run(args) -> int:
 
 def require_excitation(dataset) -> None:
     """Refuse data where the rudder or the yaw rate hardly moves: no model can be identified."""
-    active = excitation(dataset)
-    if active["rudder_std"] < MIN_RUDDER_STD or active["yaw_rate_std"] < MIN_YAW_RATE_STD:
-        raise CommandError(
-            f"too little excitation: rudder std {math.degrees(active['rudder_std']):.2f} deg "
-            f"(need {math.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std "
-            f"{math.degrees(active['yaw_rate_std']):.2f} deg/s (need {math.degrees(MIN_YAW_RATE_STD):.1f}); "
-            "record a manoeuvre such as a zigzag or turns")
+    shortfall = excitation_shortfall(dataset)
+    if shortfall:
+        raise CommandError(f"{shortfall}; record a manoeuvre such as a zigzag or turns")
 
 
 def format_estimate(estimate, source) -> str:

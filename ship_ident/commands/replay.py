@@ -5,19 +5,25 @@ as the node, with the bag's time as the clock and the node's refit
 schedule, as fast as the machine allows. ``--json`` prints one JSON object
 per refit, one per line (JSON lines: the ``~/estimate`` record of the node).
 ``--out`` writes an MCAP with the input topics and the node's outputs
-``/ship_ident/estimate`` and ``/ship_ident/parameters`` at the refit times.
+``/ship_ident/estimate`` and ``/ship_ident/parameters`` at the refit times,
+as the replay goes: Ctrl-C or SIGTERM stop it after the refit in progress
+and still leave a complete MCAP with every estimate up to then (exit code
+130 or 143).
 """
 from __future__ import annotations
 
 import math
+import signal
 import sys
+import threading
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import CommandError
-from ..io import FLOAT64, BagWriter, Topics, read_samples, typestore
-from ..online import OnlineConfig, OnlineIdentifier, run_schedule
+from ..io import FLOAT64, BagWriter, Sample, Topics, read_samples, typestore
+from ..online import OnlineConfig, OnlineIdentifier, RefitRecord, run_schedule
 from .common import add_data_args, add_model_args, dumps_json, topics_from_args
 
 ESTIMATE_TOPIC = "/ship_ident/estimate"
@@ -78,57 +84,141 @@ class Progress:
             print(file=sys.stderr)
 
 
-def run(args) -> int:
-    topics = topics_from_args(args)
-    samples = read_samples(args.bag, topics)
+@dataclass
+class ReplayResult:
+    """One bag's replay: its refit records in time order and how long it took."""
+
+    bag: str
+    records: list[RefitRecord]
+    duration: float        # s of bag time replayed
+    wall_seconds: float    # s of wall time of the identification loop
+    interrupted: bool      # stopped early by ``stop``
+
+
+def replay_bag(bag, topics: Topics, config: OnlineConfig, out=None, on_record=None,
+               stop: threading.Event | None = None, progress: bool = False) -> ReplayResult:
+    """Run one bag (or CSV) through the online identifier with the bag's time as the clock.
+
+    ``config`` as from ``config_from_args`` (its speed topic is dropped when the
+    bag has no speed). ``out``: MCAP written as the replay goes, complete even
+    when ``stop`` ends it early. ``on_record(record)`` is called after each
+    refit; ``stop`` is checked before every sample; ``progress`` draws a bar on
+    stderr. Bad input raises DataError, ConfigError or CommandError (one line).
+    """
+    samples = read_samples(bag, topics)
     if not samples:
-        raise CommandError(f"{args.bag} holds no input samples; check the topic names")
-    config = config_from_args(args, topics, any(s.role == "speed" for s in samples))
+        raise CommandError(f"{bag} holds no input samples; check the topic names")
+    if config.speed_topic and not any(s.role == "speed" for s in samples):
+        config = config.changed(speed_topic="")
     identifier = OnlineIdentifier(config)
-    progress = Progress(samples[0].time, samples[-1].time, sys.stderr.isatty())
+    bar = Progress(samples[0].time, samples[-1].time, progress)
+    records, fed = [], []
     wall0 = time.perf_counter()
-    records = []
-    for record in run_schedule(identifier, samples):
-        records.append(record)
-        progress.update(record.time)
+    with (ReplayWriter(out, topics) if out else _NoWriter()) as writer:
+        for record in run_schedule(identifier, _feed(samples, writer, stop, fed)):
+            writer.write_record(record)
+            records.append(record)
+            bar.update(record.time)
+            if on_record is not None:
+                on_record(record)
+    wall = time.perf_counter() - wall0
+    end = fed[-1].time if fed else samples[0].time
+    bar.update(end, force=True)
+    bar.close()
+    return ReplayResult(str(bag), records, end - samples[0].time, wall, len(fed) < len(samples))
+
+
+def _feed(samples, writer, stop, fed: list):
+    """The samples, each written to ``writer`` and appended to ``fed``, until ``stop`` is set."""
+    for sample in samples:
+        if stop is not None and stop.is_set():
+            return
+        writer.write_sample(sample)
+        fed.append(sample)
+        yield sample
+
+
+def run(args) -> int:
+    stop, received = threading.Event(), []
+
+    def on_signal(signum, _frame):
+        received.append(signum)
+        stop.set()
+
+    def on_record(record):
         if args.json:
             print(dumps_json(record.to_json()), flush=True)
-    progress.update(samples[-1].time, force=True)
-    progress.close()
-    wall = time.perf_counter() - wall0
-    if args.out:
-        write_replay(args.out, samples, records, topics)
+
+    topics = topics_from_args(args)
+    handlers = {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        result = replay_bag(args.bag, topics, config_from_args(args, topics, has_speed=True),
+                            args.out, on_record, stop, sys.stderr.isatty())
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+    if result.interrupted:
+        kept = f"; {args.out} holds them" if args.out else ""
+        print(f"ship-ident replay: interrupted at bag time {result.duration:.1f} s after "
+              f"{len(result.records)} refits{kept}", file=sys.stderr)
+        return 128 + received[0]
     if not args.json:
-        print_summary(records, samples[-1].time - samples[0].time, wall)
+        print_summary(result.records, result.duration, result.wall_seconds)
     return 0
 
 
-def write_replay(path, samples, records, topics: Topics) -> None:
-    """MCAP with the inputs as Float64 topics and each refit's estimate and parameters."""
-    types = typestore().types
-    Float64, String = types[FLOAT64], types["std_msgs/msg/String"]
-    MultiArray = types["std_msgs/msg/Float64MultiArray"]
-    Layout, Dimension = types["std_msgs/msg/MultiArrayLayout"], types["std_msgs/msg/MultiArrayDimension"]
-    topic_of = {"rudder": topics.rudder, "heading": topics.heading, "yaw_rate": topics.yaw_rate,
-                "speed": topics.speed}
-    if topics.imu:  # the Imu was read as heading and yaw rate: write those as Float64
-        topic_of.update(heading=Topics().heading, yaw_rate=Topics().yaw_rate)
-    events = [(s.time, 0, s) for s in samples] + [(r.time, 1, r) for r in records]
-    events.sort(key=lambda e: (e[0], e[1]))
-    with BagWriter(path, "mcap") as writer:
-        for stamp, kind, item in events:
-            if kind == 0:
-                writer.write(topic_of[item.role], FLOAT64, Float64(data=float(item.value)), stamp)
-                continue
-            data = item.to_json()
-            writer.write(ESTIMATE_TOPIC, "std_msgs/msg/String", String(data=dumps_json(data)), stamp)
-            if data["parameters"]:
-                names = list(data["parameters"])
-                layout = Layout(dim=[Dimension(label=",".join(names), size=len(names), stride=len(names))],
-                                data_offset=0)
-                values = np.array([data["parameters"][n] for n in names], dtype=np.float64)
-                writer.write(PARAMETERS_TOPIC, "std_msgs/msg/Float64MultiArray",
-                             MultiArray(layout=layout, data=values), stamp)
+class ReplayWriter:
+    """The ``--out`` MCAP: inputs as Float64 topics, each refit's estimate and parameters."""
+
+    def __init__(self, path, topics: Topics):
+        types = typestore().types
+        self._Float64, self._String = types[FLOAT64], types["std_msgs/msg/String"]
+        self._MultiArray = types["std_msgs/msg/Float64MultiArray"]
+        self._Layout = types["std_msgs/msg/MultiArrayLayout"]
+        self._Dimension = types["std_msgs/msg/MultiArrayDimension"]
+        self._topic_of = {"rudder": topics.rudder, "heading": topics.heading,
+                          "yaw_rate": topics.yaw_rate, "speed": topics.speed}
+        if topics.imu:  # the Imu was read as heading and yaw rate: write those as Float64
+            self._topic_of.update(heading=Topics().heading, yaw_rate=Topics().yaw_rate)
+        self._writer = BagWriter(path, "mcap")
+
+    def write_sample(self, sample: Sample) -> None:
+        self._writer.write(self._topic_of[sample.role], FLOAT64,
+                           self._Float64(data=float(sample.value)), sample.time)
+
+    def write_record(self, record: RefitRecord) -> None:
+        data = record.to_json()
+        self._writer.write(ESTIMATE_TOPIC, "std_msgs/msg/String", self._String(data=dumps_json(data)),
+                           record.time)
+        if data["parameters"]:
+            names = list(data["parameters"])
+            layout = self._Layout(dim=[self._Dimension(label=",".join(names), size=len(names),
+                                                       stride=len(names))], data_offset=0)
+            values = np.array([data["parameters"][n] for n in names], dtype=np.float64)
+            self._writer.write(PARAMETERS_TOPIC, "std_msgs/msg/Float64MultiArray",
+                               self._MultiArray(layout=layout, data=values), record.time)
+
+    def __enter__(self) -> "ReplayWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._writer.close()
+
+
+class _NoWriter:
+    """Stands in for ReplayWriter without ``--out``."""
+
+    def write_sample(self, sample) -> None:
+        pass
+
+    def write_record(self, record) -> None:
+        pass
+
+    def __enter__(self) -> "_NoWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
 
 
 def print_summary(records, duration: float, wall: float) -> None:

@@ -17,11 +17,12 @@ import numpy as np
 
 from ..dataset import DataError, Dataset
 from ..metrics import effective_sample_fraction, free_run_fit
-from ..signals import Signals, compute_signals
+from ..signals import Signals, compute_signals, noise_level
 from ..structure import Regression, Structure
 
 MIN_RUDDER_STD = np.radians(1.0)   # rad: below this the rudder does not excite the hull
-MIN_YAW_RATE_STD = np.radians(0.3)  # rad/s
+MIN_YAW_RATE_STD = np.radians(0.02)  # rad/s: an absolute floor under the noise-relative need
+MIN_YAW_RATE_SNR = 5.0                # yaw-rate std needed, in multiples of the sensor noise
 
 
 @dataclass
@@ -70,16 +71,26 @@ class Estimate:
 
 
 def excitation(dataset: Dataset) -> dict:
-    """Rudder and yaw-rate activity of a dataset (rad, rad/s)."""
+    """Rudder and yaw-rate activity of a dataset (rad, rad/s), and the yaw-rate activity needed:
+    five times the yaw-rate sensor noise, so that a slow large ship is judged by its own noise."""
     return {"rudder_std": float(np.std(dataset.rudder)),
-            "yaw_rate_std": float(np.std(dataset.yaw_rate))}
+            "yaw_rate_std": float(np.std(dataset.yaw_rate)),
+            "yaw_rate_std_needed": max(MIN_YAW_RATE_SNR * noise_level(dataset.yaw_rate, 0.0),
+                                       MIN_YAW_RATE_STD)}
+
+
+def excitation_shortfall(dataset: Dataset) -> str | None:
+    """Why the data cannot support an estimate (a sentence with degrees), or None."""
+    ex = excitation(dataset)
+    if ex["rudder_std"] >= MIN_RUDDER_STD and ex["yaw_rate_std"] >= ex["yaw_rate_std_needed"]:
+        return None
+    return (f"too little excitation: rudder std {np.degrees(ex['rudder_std']):.2f} deg "
+            f"(need {np.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
+            f"deg/s (need {np.degrees(ex['yaw_rate_std_needed']):.3f}, five times its noise)")
 
 
 def excitation_flags(dataset: Dataset) -> list[str]:
-    ex = excitation(dataset)
-    if ex["rudder_std"] < MIN_RUDDER_STD or ex["yaw_rate_std"] < MIN_YAW_RATE_STD:
-        return ["low_excitation"]
-    return []
+    return ["low_excitation"] if excitation_shortfall(dataset) else []
 
 
 def fit_substeps(h: float, params: dict) -> int:

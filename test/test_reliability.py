@@ -1,0 +1,48 @@
+"""The bad-input catalogue of docs/reliability.md: replay's one-line errors, heading wraps, and that
+every test the catalogue names exists."""
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ship_ident.cli import main
+from ship_ident.io import Sample
+from ship_ident.online import OnlineConfig, OnlineIdentifier, run_schedule
+from ship_ident.simulator import simulate
+from test_io import BAD_INPUTS, make_bad_input, written  # noqa: F401  (fixture)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("kind", BAD_INPUTS)
+def test_replay_of_bad_input_is_one_line_and_exit_2(kind, tmp_path, written, capsys):  # noqa: F811
+    path = make_bad_input(kind, tmp_path, written["mcap"])
+    assert main(["replay", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert BAD_INPUTS[kind] in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_heading_wrapping_through_pi_both_ways_is_plausible(direction):
+    """Turning circles to starboard and to port: the wrapped heading crosses +-pi many times."""
+    d = simulate("turning", duration=150.0, seed=1).dataset
+    wrapped = np.mod(direction * d.heading + np.pi, 2 * np.pi) - np.pi
+    assert np.sum(np.abs(np.diff(wrapped)) > np.pi) >= 2
+    samples = [Sample(float(t), role, float(v)) for i, t in enumerate(d.time)
+               for role, v in (("rudder", direction * d.rudder[i]), ("heading", wrapped[i]),
+                               ("yaw_rate", direction * d.yaw_rate[i]))]
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0,
+                                                              method="rwlssvm")), samples))
+    seen = {c for r in records for c in r.conditions}
+    assert not seen & {"heading_in_degrees", "yaw_rate_sign", "rejected_samples", "clock_jump"}
+
+
+def test_every_test_the_catalogue_names_exists():
+    table = (ROOT / "docs" / "reliability.md").read_text()
+    named = set(re.findall(r"`(test_\w+)::(test_\w+)`", table))
+    assert len(named) >= 20
+    for module, test in named:
+        source = (ROOT / "test" / f"{module}.py").read_text()
+        assert f"def {test}(" in source, f"{module}::{test}"

@@ -2,7 +2,7 @@
 
 ``ship-ident replay BAG... [--jobs N] [--dask ADDRESS|local] [--table OUT.csv] [--plot-dir DIR]``
 replays every bag exactly as ``ship-ident replay`` replays one (the node's
-``OnlineIdentifier``, the bag's time as its clock) in ``identify_bag``, one
+``OnlineIdentifier``, the bag's time as its clock: replay's ``replay_bag``) in ``identify_bag``, one
 bag per task. ``--jobs N`` spreads the bags over N local processes
 (``concurrent.futures.ProcessPoolExecutor``); ``--dask ADDRESS`` sends the
 same tasks to a running Dask scheduler, ``--dask local`` starts a local Dask
@@ -38,8 +38,8 @@ from pathlib import Path
 
 from .dataset import DataError
 from .errors import CommandError
-from .io import Topics, read_samples
-from .online import ConfigError, OnlineConfig, OnlineIdentifier, run_schedule
+from .io import Topics
+from .online import ConfigError, OnlineConfig
 
 UNIX_TIME_AFTER_2001 = 1e9  # s: bag stamps above this are wall-clock dates
 
@@ -62,32 +62,28 @@ class BagResult:
     rows: list = field(default_factory=list)
     refits: int = 0
     bag_seconds: float = 0.0     # s of bag time covered
-    read_seconds: float = 0.0    # wall s to read the bag
+    read_seconds: float = 0.0    # wall s to read the bag (and set up)
     loop_seconds: float = 0.0    # wall s of the identification loop
     error: str = ""
 
 
 def identify_bag(job: BagJob) -> BagResult:
-    """Replay one bag through the online identifier; the per-bag task of every executor."""
+    """Replay one bag as ``ship-ident replay`` does (``replay_bag``); the per-bag task of every executor."""
+    from .commands.replay import replay_bag
+
     result = BagResult(job)
     try:
         t0 = time.perf_counter()
-        samples = read_samples(job.bag, job.topics)
-        result.read_seconds = time.perf_counter() - t0
-        if not samples:
-            raise DataError(f"{job.bag} holds no input samples; check the topic names")
-        config = job.config
-        if config.speed_topic and not any(s.role == "speed" for s in samples):
-            config = config.changed(speed_topic="")
-        t0 = time.perf_counter()
-        records = list(run_schedule(OnlineIdentifier(config), samples))
-        result.loop_seconds = time.perf_counter() - t0
-    except (DataError, ConfigError) as exc:
+        replay = replay_bag(job.bag, job.topics, job.config)
+        total = time.perf_counter() - t0
+    except (DataError, ConfigError, CommandError) as exc:
         result.error = str(exc)
         return result
-    result.refits = len(records)
-    result.bag_seconds = samples[-1].time - samples[0].time
-    result.rows = [table_row(job, record.to_json()) for record in records if record.new_estimate]
+    result.refits = len(replay.records)
+    result.bag_seconds = replay.duration
+    result.loop_seconds = replay.wall_seconds
+    result.read_seconds = total - replay.wall_seconds
+    result.rows = [table_row(job, record.to_json()) for record in replay.records if record.new_estimate]
     return result
 
 
@@ -138,8 +134,9 @@ def add_fleet_arguments(parser) -> None:
 
 def run_fleet(args, bags: list[str]) -> int:
     """Replay many bags (``args`` from replay's parser); table, plots, bags per minute. Exit code."""
-    from .commands.replay import config_from_args
     from .commands.common import topics_from_args
+    from .jsonio import dumps_json
+    from .commands.replay import config_from_args  # lazily: replay imports this module
 
     if args.jobs < 1:
         raise CommandError(f"--jobs must be >= 1, got {args.jobs}")
@@ -163,7 +160,6 @@ def run_fleet(args, bags: list[str]) -> int:
                "bags_per_minute": rate, "bag_hours": sum(r.bag_seconds for r in results) / 3600.0,
                "table": args.table, "plots": plots, "vessels": vessel_summary(rows)}
     if args.json:
-        from .commands.common import dumps_json
         print(dumps_json(summary))
     else:
         print_summary(summary)

@@ -41,7 +41,7 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
-from .commands.common import dumps_json
+from .jsonio import dumps_json
 from .estimators import method_names
 from .io import FLOAT64, IMU, Sample, imu_samples
 from .online import (CONDITION_LEVELS, MAX_WINDOW_SAMPLES, ConfigError, EstimateLog, OnlineConfig,

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .commands.common import dumps_json
+from .jsonio import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import MethodError, make_estimator
 from .estimators.base import MIN_RUDDER_STD
@@ -84,10 +84,11 @@ SATURATION_MIN_ANGLE = math.radians(5.0)  # rad: holding smaller angles is not s
 REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
 
 # Estimator flags that make an estimate unusable even with a good-looking fit: the closed-form
-# map gave a gain or time constant outside its physical range, or the output-error search
-# stopped before it converged.
+# map gave a gain or time constant outside its physical range, the output-error search ended
+# with the gain or the main time constant on a bound (no hull has K = 100 1/s), or it stopped
+# before it converged.
 POOR_FIT_FLAGS = ("complex_time_constants", "K_out_of_bounds", "T_out_of_bounds", "T1_out_of_bounds",
-                  "T2_out_of_bounds", "oe_not_converged")
+                  "T2_out_of_bounds", "at_bound:K", "at_bound:T", "at_bound:T1", "oe_not_converged")
 
 
 class ConfigError(ValueError):
@@ -429,10 +430,13 @@ class OnlineIdentifier:
         structure = config.structure()
         estimator = make_estimator(config.method)
         try:
+            estimate = None
             if hasattr(estimator, "refine") and last_good is not None and last_good.ok \
                     and last_good.method == config.method:
                 estimate = estimator.refine(structure, dataset, last_good)  # warm start
-            else:
+                if any(f in POOR_FIT_FLAGS for f in estimate.flags) or not estimate.ok:
+                    estimate = None  # the vessel changed beyond the warm start's reach: fit afresh
+            if estimate is None:
                 estimate = estimator.fit(structure, dataset)
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record.conditions["refit_failed"] = f"{type(exc).__name__}: {exc}"

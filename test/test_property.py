@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ship_ident.commands.common import dumps_json
+from ship_ident.jsonio import dumps_json
 from ship_ident.io import ROLES, Sample
 from ship_ident.online import OnlineConfig, OnlineIdentifier, run_schedule
 from ship_ident.simulator import simulate

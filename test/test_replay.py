@@ -109,5 +109,5 @@ def test_replay_bag_is_callable_per_bag(bag):
     config = OnlineConfig(method="rwlssvm", refit_period=20.0, speed_topic="/usv/speed")
     result = replay_bag(path, Topics(), config)
     assert not result.interrupted and result.duration == pytest.approx(300.0)
-    assert [r.time for r in result.records] == pytest.approx([20.0 * k for k in range(1, 15)])
+    assert [r.time for r in result.records] == pytest.approx([20.0 * k for k in range(1, 16)])
     assert result.records[-1].estimate["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)

@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import math
 
 from ..dataset import Dataset
 from ..estimators import DEFAULT_METHOD, method_names
@@ -55,21 +53,3 @@ def structure_from_args(args: argparse.Namespace) -> Structure:
 def add_json_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object on stdout and nothing else there")
-
-
-def strict_json(value):
-    """``value`` as plain JSON types, NaN and Inf replaced by None (any JSON parser accepts it)."""
-    if hasattr(value, "tolist"):  # numpy scalars and arrays
-        value = value.tolist()
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: strict_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [strict_json(v) for v in value]
-    return value
-
-
-def dumps_json(record: dict, indent: int | None = None) -> str:
-    """Strict JSON text of a record (NaN/Inf as null)."""
-    return json.dumps(strict_json(record), indent=indent, allow_nan=False)

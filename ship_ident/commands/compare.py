@@ -9,7 +9,8 @@ import numpy as np
 from ..errors import CommandError
 from ..metrics import free_run_fit
 from ..structure import Structure, require_samples
-from .common import add_data_args, add_json_arg, dumps_json, load_data
+from ..jsonio import dumps_json
+from .common import add_data_args, add_json_arg, load_data
 from .identify import format_fit
 
 

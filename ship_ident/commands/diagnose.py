@@ -7,7 +7,8 @@ import time
 
 from ..diagnose import DEFAULT_METHOD, covered, diagnose
 from ..structure import parse_effects, require_samples
-from .common import add_data_args, add_json_arg, add_model_args, dumps_json, load_data
+from ..jsonio import dumps_json
+from .common import add_data_args, add_json_arg, add_model_args, load_data
 
 DEG = math.degrees(1.0)
 

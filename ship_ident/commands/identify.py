@@ -8,8 +8,8 @@ from ..errors import CommandError
 from ..estimators import make_estimator
 from ..estimators.base import excitation_shortfall
 from ..structure import require_samples
-from .common import (add_data_args, add_json_arg, add_model_args, dumps_json, load_data,
-                     structure_from_args)
+from ..jsonio import dumps_json
+from .common import add_data_args, add_json_arg, add_model_args, load_data, structure_from_args
 
 
 def add_parser(subparsers) -> None:

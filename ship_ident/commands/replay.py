@@ -22,9 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CommandError
+from ..fleet import add_fleet_arguments, run_fleet
 from ..io import FLOAT64, BagWriter, Sample, Topics, read_samples, typestore
 from ..online import OnlineConfig, OnlineIdentifier, RefitRecord, run_schedule
-from .common import add_data_args, add_model_args, dumps_json, topics_from_args
+from ..jsonio import dumps_json
+from .common import add_data_args, add_model_args, topics_from_args
 
 ESTIMATE_TOPIC = "/ship_ident/estimate"
 PARAMETERS_TOPIC = "/ship_ident/parameters"
@@ -35,7 +37,9 @@ def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "replay", help="run the online identifier over a bag, faster than real time",
         description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("bag", metavar="BAG", help="rosbag2 directory, .mcap file or CSV file")
+    parser.add_argument("bag", metavar="BAG", nargs="+",
+                        help="rosbag2 directory, .mcap file or CSV file; several (or --jobs, --table, "
+                             "--dask): a fleet run into one table, see ship_ident/fleet.py")
     add_data_args(parser)
     add_model_args(parser)
     parser.set_defaults(effects=",".join(DEFAULTS.effects), method=DEFAULTS.method)
@@ -49,6 +53,7 @@ def add_parser(subparsers) -> None:
                         help="print one JSON object per refit on stdout, one per line (JSON lines)")
     parser.add_argument("--out", metavar="OUT.mcap",
                         help="write an MCAP with the input topics and the estimates")
+    add_fleet_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -139,6 +144,11 @@ def _feed(samples, writer, stop, fed: list):
 
 
 def run(args) -> int:
+    if len(args.bag) > 1 or args.jobs > 1 or args.table or args.dask:
+        if args.out:
+            raise CommandError("--out takes a single bag; for many bags use --table")
+        return run_fleet(args, args.bag)
+    bag = args.bag[0]
     stop, received = threading.Event(), []
 
     def on_signal(signum, _frame):
@@ -152,7 +162,7 @@ def run(args) -> int:
     topics = topics_from_args(args)
     handlers = {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
-        result = replay_bag(args.bag, topics, config_from_args(args, topics, has_speed=True),
+        result = replay_bag(bag, topics, config_from_args(args, topics, has_speed=True),
                             args.out, on_record, stop, sys.stderr.isatty())
     finally:
         for signum, handler in handlers.items():

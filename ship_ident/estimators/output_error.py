@@ -27,7 +27,9 @@ The Jacobian is a forward difference with one simulation per physical
 parameter plus one per state component (the intervals' states touch
 disjoint residuals, so they are perturbed together). Standard errors are
 Newey-West (sandwich) ones, honest under the residual autocorrelation that
-remains (``parameter_std_errors``).
+remains (``parameter_std_errors``). Residuals beyond 5 robust standard
+deviations of the start's residual get Huber weights, so that sensor spikes
+do not drag the fit.
 """
 from __future__ import annotations
 
@@ -132,6 +134,21 @@ def parameter_std_errors(J: np.ndarray, f: np.ndarray, n_samples: int, p: int, b
     return np.sqrt(np.clip(np.diag(meat), 0, None))
 
 
+HUBER_THRESHOLD = 5.0  # robust standard deviations beyond which a residual counts linearly
+
+
+def huber_weights(start_residual: np.ndarray, n_samples: int) -> np.ndarray:
+    """Square roots of Huber's IRLS weights min(1, c s / |e|) for the heading and the yaw-rate
+    halves of the start's residual, s = 1.483 MAD per half: isolated sensor spikes (tens of
+    noise levels) then pull on the fit linearly, not quadratically."""
+    weights = np.ones_like(start_residual)
+    for half in (slice(0, n_samples), slice(n_samples, 2 * n_samples)):
+        e = start_residual[half]
+        scale = 1.483 * np.median(np.abs(e - np.median(e))) or 1.0
+        weights[half] = np.minimum(1.0, HUBER_THRESHOLD * scale / np.maximum(np.abs(e), 1e-300))
+    return np.sqrt(weights)
+
+
 class OutputError(Estimator):
     """Refine a starting estimator's result by minimising the free-run error."""
 
@@ -200,6 +217,7 @@ class OutputError(Estimator):
             return params, initial
 
         simulations = 0
+        robust = np.ones(2 * dataset.n_samples)  # Huber weights (square roots), fixed at the start
 
         def residual(x):
             nonlocal simulations
@@ -209,7 +227,7 @@ class OutputError(Estimator):
             psi_err, r_err = psi - dataset.heading, r - dataset.yaw_rate
             if not (np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err))):
                 return np.full(2 * dataset.n_samples, 1e6)
-            return weigh(psi_err, r_err)
+            return robust * weigh(psi_err, r_err)
 
         def jacobian(x, f0):
             """Forward differences: one column per parameter, one grouped pass per state component."""
@@ -234,6 +252,7 @@ class OutputError(Estimator):
         starts = [np.clip(np.concatenate([s, states0.ravel()]), lo, hi)
                   for s in self._starts(structure, names, np.array([params0[n] for n in names]), params0)]
         x0 = min(starts, key=lambda x: float(np.sum(residual(x) ** 2)))
+        robust = huber_weights(residual(x0), dataset.n_samples)
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
         params, _ = unpack(result.x)
         std = parameter_std_errors(result.jac, result.fun, dataset.n_samples, p,

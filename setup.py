@@ -40,13 +40,13 @@ setup(
         "ros": ROS_WHEELS,
         "test": ["pytest", "pytest-xdist", "hypothesis", "colcon-common-extensions"],
         "bench": ["sysidentpy", "dask[distributed]"],
+        "fleet": ["dask[distributed]"],
     },
     zip_safe=True,
     maintainer="ship_ident team",
     maintainer_email="team@ship-ident.invalid",
     description="Online identification of USV steering dynamics with LS-SVM",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "identifier_node = ship_ident.node:main",

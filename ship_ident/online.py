@@ -30,7 +30,7 @@ from .jsonio import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import MethodError, make_estimator
 from .estimators.base import MIN_RUDDER_STD
-from .io import ROLES, Sample
+from .io import ROLES, Sample, Topics
 from .structure import Structure, StructureError
 
 REQUIRED_ROLES = ("rudder", "heading", "yaw_rate")
@@ -91,6 +91,9 @@ POOR_FIT_FLAGS = ("complex_time_constants", "K_out_of_bounds", "T_out_of_bounds"
                   "T2_out_of_bounds", "at_bound:K", "at_bound:T", "at_bound:T1", "oe_not_converged")
 
 
+DEFAULT_TOPICS = Topics()
+
+
 class ConfigError(ValueError):
     """An online configuration value out of range or unknown; the message says which and why."""
 
@@ -99,10 +102,10 @@ class ConfigError(ValueError):
 class OnlineConfig:
     """Everything the online identifier and the node are configured with (SI units)."""
 
-    rudder_topic: str = "/usv/rudder"
-    heading_topic: str = "/usv/heading"
-    yaw_rate_topic: str = "/usv/yaw_rate"
-    speed_topic: str = ""                 # empty: no speed input
+    rudder_topic: str = DEFAULT_TOPICS.rudder
+    heading_topic: str = DEFAULT_TOPICS.heading
+    yaw_rate_topic: str = DEFAULT_TOPICS.yaw_rate
+    speed_topic: str = ""                 # empty: no speed input (DEFAULT_TOPICS.speed when wanted)
     imu_topic: str = ""                   # sensor_msgs/Imu (ENU) instead of heading and yaw rate
     sample_time: float = 0.1              # s, grid the window is resampled to
     window_length: float = 180.0          # s of data in each fit

@@ -1,4 +1,5 @@
 """The package builds with colcon into a ROS 2 install space whose executables start."""
+import json
 import os
 import shutil
 import subprocess
@@ -53,9 +54,31 @@ def test_built_ship_ident_starts_from_the_install_space(workspace):
     assert str(workspace / "install") in where.stdout, where.stdout + where.stderr
 
 
-def test_built_identifier_node_entry_point_imports(workspace):
-    """identifier_node spins until SIGINT (no quick-exit option): only its entry point is checked."""
-    if not (PACKAGE_ROOT / "ship_ident" / "node.py").exists():
-        pytest.skip("ship_ident/node.py is not written yet")
-    result = run_sourced(workspace, "python -c 'from ship_ident.node import main; assert callable(main)'")
-    assert result.returncode == 0, result.stderr
+def test_built_identifier_node_with_the_params_file_starts_and_identifies(workspace, tmp_path):
+    """What `ros2 run ship_ident identifier_node --ros-args --params-file ...` starts, fed by play."""
+    from ship_ident.demo import Listener, ros_environment, start_play, stop
+
+    domain = 101  # outside the 1..100 range the other node tests draw from
+    env = dict(ros_environment(domain, tmp_path), AMENT_PREFIX_PATH=str(VENV_BIN.parent),
+               PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
+    share = workspace / "install" / "ship_ident" / "share" / "ship_ident"
+    command = (f"source install/setup.bash && exec install/ship_ident/lib/ship_ident/identifier_node "
+               f"--ros-args --params-file {share / 'config' / 'ship_ident.yaml'} -p use_sim_time:=true")
+    node = subprocess.Popen(["bash", "-c", command], cwd=workspace, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    listener = Listener(domain)
+    play = start_play(env, share / "bags" / "demo_seed001.mcap", 20.0, stderr=subprocess.PIPE, text=True)
+    try:
+        while play.poll() is None:
+            listener.spin(0.2)
+        listener.spin(1.0)
+        assert play.returncode == 0, play.stderr.read()
+    finally:
+        stop(play)
+        code, log, _ = stop(node)
+        listener.close()
+    assert code == 0, log
+    truth = json.loads((share / "bags" / "demo_seed001.truth.json").read_text())["parameters"]
+    new = [e for e in listener.estimates if e["new_estimate"]]
+    assert new, log
+    assert new[-1]["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)

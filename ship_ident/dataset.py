@@ -7,6 +7,7 @@ forward speed in m/s. A positive rudder angle gives a positive yaw rate.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -47,9 +48,9 @@ class Dataset:
     def n_samples(self) -> int:
         return len(self.time)
 
-    @property
+    @cached_property
     def sample_time(self) -> float:
-        """Sample time in s (the grid step)."""
+        """Sample time in s (the grid step; computed once per dataset)."""
         if self.n_samples < 2:
             return float(self.meta.get("sample_time", 0.1))
         start, stop = max(self.segments, key=lambda s: s[1] - s[0])

@@ -72,7 +72,9 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
                               capture_output=True, text=True, timeout=120, env=env)
     records = [json.loads(line) for line in replayed.stdout.splitlines()]
     twin = min(records, key=lambda r: abs(r["stamp"] - final["stamp"]))
-    assert abs(twin["stamp"] - final["stamp"]) <= 1.0
+    # The node's schedule starts at its first /clock reading, replay's at the bag's first sample:
+    # the nearest replay refit is at most half a refit period (2.5 s) away.
+    assert abs(twin["stamp"] - final["stamp"]) <= 2.5
     # Arrival stamping (node) against bag stamps (replay) moves samples by up to one /clock step.
     assert final["parameters"]["K"] == pytest.approx(twin["parameters"]["K"], rel=0.02)
     assert final["parameters"]["T1"] == pytest.approx(twin["parameters"]["T1"], rel=0.05)

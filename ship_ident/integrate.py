@@ -79,30 +79,30 @@ def initial_z(K, T1, T2, T3, r, rdot, rudder):
 
 @njit(cache=True)
 def simulate_kernel(order, h, rudder, gain_scale, time_scale, K0, T10, T20, T30,
-                    psi0, r0, rdot0, coef, r_power, abs_power, harmonic, trig, substeps):
-    """Integrate from sample 0 with RK4, ``substeps`` steps per sample.
+                    bounds, initial, coef, r_power, abs_power, harmonic, trig, substeps):
+    """Integrate every segment ``bounds[i] = (start, stop)`` from ``initial[i] = (psi0, r0,
+    rdot0)`` with RK4, ``substeps`` steps per sample.
 
-    Returns heading (rad) and yaw rate (rad/s) at every sample. A blow-up
-    (non-finite state) fills the rest with NaN.
+    Returns heading (rad) and yaw rate (rad/s) at every sample (NaN outside the
+    segments). A blow-up (non-finite state) fills the rest of its segment with NaN.
     """
     n = rudder.shape[0]
-    psi_out = np.empty(n)
-    r_out = np.empty(n)
-    psi, r = psi0, r0
-    K, T1, T2, T3 = K0 * gain_scale[0], T10 * time_scale[0], T20 * time_scale[0], T30 * time_scale[0]
-    z = initial_z(K, T1, T2, T3, r, rdot0, rudder[0])
-    psi_out[0], r_out[0] = psi, r
-    for k in range(n - 1):
-        K = K0 * gain_scale[k]
-        T1, T2, T3 = T10 * time_scale[k], T20 * time_scale[k], T30 * time_scale[k]
-        psi, r, z = advance(order, h, rudder[k], rudder[k + 1], K, T1, T2, T3, psi, r, z,
-                            coef, r_power, abs_power, harmonic, trig, substeps)
-        if not (np.isfinite(psi) and np.isfinite(r)) or abs(r) > 1e3:
-            for m in range(k + 1, n):
-                psi_out[m] = np.nan
-                r_out[m] = np.nan
-            return psi_out, r_out
-        psi_out[k + 1], r_out[k + 1] = psi, r
+    psi_out = np.full(n, np.nan)
+    r_out = np.full(n, np.nan)
+    for i in range(bounds.shape[0]):
+        a, b = bounds[i, 0], bounds[i, 1]
+        psi, r = initial[i, 0], initial[i, 1]
+        K, T1, T2, T3 = K0 * gain_scale[a], T10 * time_scale[a], T20 * time_scale[a], T30 * time_scale[a]
+        z = initial_z(K, T1, T2, T3, r, initial[i, 2], rudder[a])
+        psi_out[a], r_out[a] = psi, r
+        for k in range(a, b - 1):
+            K = K0 * gain_scale[k]
+            T1, T2, T3 = T10 * time_scale[k], T20 * time_scale[k], T30 * time_scale[k]
+            psi, r, z = advance(order, h, rudder[k], rudder[k + 1], K, T1, T2, T3, psi, r, z,
+                                coef, r_power, abs_power, harmonic, trig, substeps)
+            if not (np.isfinite(psi) and np.isfinite(r)) or abs(r) > 1e3:
+                break
+            psi_out[k + 1], r_out[k + 1] = psi, r
     return psi_out, r_out
 
 

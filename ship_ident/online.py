@@ -87,8 +87,9 @@ REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
 # map gave a gain or time constant outside its physical range, the output-error search ended
 # with the gain or the main time constant on a bound (no hull has K = 100 1/s), or it stopped
 # before it converged.
+STUCK_FLAGS = ("at_bound:K", "at_bound:T", "at_bound:T1")  # a warm start that ends here is refitted cold
 POOR_FIT_FLAGS = ("complex_time_constants", "K_out_of_bounds", "T_out_of_bounds", "T1_out_of_bounds",
-                  "T2_out_of_bounds", "at_bound:K", "at_bound:T", "at_bound:T1", "oe_not_converged")
+                  "T2_out_of_bounds", "oe_not_converged") + STUCK_FLAGS
 
 
 DEFAULT_TOPICS = Topics()
@@ -437,7 +438,7 @@ class OnlineIdentifier:
             if hasattr(estimator, "refine") and last_good is not None and last_good.ok \
                     and last_good.method == config.method:
                 estimate = estimator.refine(structure, dataset, last_good)  # warm start
-                if any(f in POOR_FIT_FLAGS for f in estimate.flags) or not estimate.ok:
+                if any(f in STUCK_FLAGS for f in estimate.flags):
                     estimate = None  # the vessel changed beyond the warm start's reach: fit afresh
             if estimate is None:
                 estimate = estimator.fit(structure, dataset)

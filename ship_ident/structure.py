@@ -117,8 +117,6 @@ class Structure:
         its first sample with r' = 0.
         """
         self.check_data(dataset)
-        psi_out = np.full(dataset.n_samples, np.nan)
-        r_out = np.full(dataset.n_samples, np.nan)
         h = dataset.sample_time
         time_constants = [params["T"]] if self.order == 1 else [params["T1"], params["T2"]]
         substeps = substeps or substeps_for(h, min(time_constants))
@@ -131,16 +129,14 @@ class Structure:
         T1 = params["T"] if self.order == 1 else params["T1"]
         T2 = 0.0 if self.order == 1 else params["T2"]
         T3 = 0.0 if self.order == 1 else params["T3"]
-        bias = self.measured_yaw_rate(np.zeros(1), params)[0]
-        for i, (a, b) in enumerate(dataset.segments):
-            if initial is not None:
-                psi0, r0, rdot0 = initial[i]
-            else:
-                psi0, r0, rdot0 = dataset.heading[a], dataset.yaw_rate[a] - bias, 0.0
-            psi, r = simulate_kernel(self.order, h, np.ascontiguousarray(rudder[a:b]),
-                                     np.ascontiguousarray(gain[a:b]), np.ascontiguousarray(tscale[a:b]),
-                                     K, T1, T2, T3, psi0, r0, rdot0, coef, *ints, substeps)
-            psi_out[a:b], r_out[a:b] = psi, r
+        bounds = np.array(dataset.segments, dtype=np.int64).reshape(-1, 2)
+        if initial is None:
+            bias = self.measured_yaw_rate(np.zeros(1), params)[0]
+            initial = [(dataset.heading[a], dataset.yaw_rate[a] - bias, 0.0) for a, _ in dataset.segments]
+        psi_out, r_out = simulate_kernel(self.order, h, np.ascontiguousarray(rudder, dtype=float),
+                                         np.ascontiguousarray(gain, dtype=float),
+                                         np.ascontiguousarray(tscale, dtype=float), K, T1, T2, T3, bounds,
+                                         np.array(initial, dtype=float).reshape(-1, 3), coef, *ints, substeps)
         return psi_out, self.measured_yaw_rate(r_out, params)
 
     def effective_inputs(self, params: dict, time: np.ndarray, rudder: np.ndarray,

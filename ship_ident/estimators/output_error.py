@@ -43,6 +43,7 @@ from ..structure import Structure
 from .base import Estimate, Estimator, finish_estimate, fit_substeps
 
 MAX_INTERVALS = 64          # shooting intervals per window at most (each adds 2-3 unknowns)
+CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
 MIN_INTERVAL_SAMPLES = 50   # shorter intervals are not split further
 
 
@@ -74,7 +75,9 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
 
     The normal equations are (p x p) with p the unknowns, so an iteration costs the
     Jacobian's simulations and almost nothing else. It stops when a step gains less than
-    ``tolerance`` of the cost: far below the chi-square scatter of the cost, 1/sqrt(N).
+    ``tolerance`` of the cost (far below the chi-square scatter of the cost, 1/sqrt(N)) or less
+    than ``CHI_SQUARE_TOLERANCE``: the residuals are in noise units, so such a step moves the
+    parameters by a tenth of a standard error or less.
     """
     x = np.clip(np.asarray(x0, dtype=float), lower, upper)
     f = residual(x)
@@ -104,7 +107,7 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
             converged = True   # no descent left at this precision
             break
         small_step = np.all(np.abs(x_new - x) <= tolerance * (np.abs(x) + 1e-3))
-        small_gain = cost - cost_new <= tolerance * cost
+        small_gain = cost - cost_new <= max(tolerance * cost, CHI_SQUARE_TOLERANCE)
         x, f, cost = x_new, f_new, cost_new
         lam = max(lam / 10.0, 1e-9)
         J = jacobian(x, f)

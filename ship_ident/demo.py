@@ -65,6 +65,17 @@ def stop(process: subprocess.Popen, timeout: float = 5.0):
     return process.returncode, out, err
 
 
+def shut_down(node: subprocess.Popen, listener, *feeders: subprocess.Popen | None) -> tuple[int, str]:
+    """Stop the feeders (e.g. ``play``), then the node (SIGINT), then close the listener;
+    returns the node's exit code and its output."""
+    for feeder in feeders:
+        if feeder is not None:
+            stop(feeder)
+    code, out, _ = stop(node)
+    listener.close()
+    return code, out
+
+
 class Listener:
     """An in-process rclpy node on its own context that collects the identifier's outputs."""
 
@@ -154,10 +165,7 @@ def main() -> int:
             print("\ninterrupted")
             return 130
         finally:
-            if play is not None:
-                stop(play)
-            stop(node)
-            listener.close()
+            shut_down(node, listener, play)
             node_log.close()
 
 

@@ -237,7 +237,7 @@ def equation_residual(structure: Structure, parameters: dict, signals: Signals) 
     h = signals.sample_time
     rudder, gain, tscale = structure.effective_inputs(p, signals.time, signals.delta, signals.speed)
     rudder_rate = np.gradient(rudder, h) if len(rudder) > 1 else np.zeros_like(rudder)
-    r = signals.r - structure.measured_yaw_rate(np.zeros(1), p)[0]
+    r = signals.r - structure.yaw_rate_bias(p)
     forcing = np.zeros_like(r)
     for effect in structure.effects:
         for term in effect.forcing_terms(p):

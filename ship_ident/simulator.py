@@ -178,7 +178,7 @@ def simulate(maneuver: str = "mixed", vessel: str | Vessel = "seed001", effects=
     fine = Dataset(time=t_fine, rudder=rudder_fine, heading=zeros, yaw_rate=zeros, speed=speed_fine,
                    meta={"sample_time": fine_step})
     psi_fine, r_meas_fine = structure.simulate(truth, fine, initial=[(0.0, 0.0, 0.0)], substeps=2)
-    r_fine = r_meas_fine - structure.measured_yaw_rate(np.zeros(1), truth)[0]
+    r_fine = r_meas_fine - structure.yaw_rate_bias(truth)
     truth_after = None
     if change is not None:
         i = int(round(change[0] / fine_step))
@@ -186,7 +186,7 @@ def simulate(maneuver: str = "mixed", vessel: str | Vessel = "seed001", effects=
         state = (psi_fine[i], r_fine[i], (r_fine[i] - r_fine[i - 1]) / fine_step)
         psi_fine[i:], r_meas_fine[i:] = structure.simulate(truth_after, fine.slice(i, len(t_fine)),
                                                            initial=[state], substeps=2)
-        r_fine[i:] = r_meas_fine[i:] - structure.measured_yaw_rate(np.zeros(1), truth_after)[0]
+        r_fine[i:] = r_meas_fine[i:] - structure.yaw_rate_bias(truth_after)
     idx = np.arange(0, len(t_fine), stride)
     noise = Noise().scaled(noise) if not isinstance(noise, Noise) else noise
     n = len(idx)

@@ -131,7 +131,7 @@ class Structure:
         T3 = 0.0 if self.order == 1 else params["T3"]
         bounds = np.array(dataset.segments, dtype=np.int64).reshape(-1, 2)
         if initial is None:
-            bias = self.measured_yaw_rate(np.zeros(1), params)[0]
+            bias = self.yaw_rate_bias(params)
             initial = [(dataset.heading[a], dataset.yaw_rate[a] - bias, 0.0) for a, _ in dataset.segments]
         psi_out, r_out = simulate_kernel(self.order, h, np.ascontiguousarray(rudder, dtype=float),
                                          np.ascontiguousarray(gain, dtype=float),
@@ -152,6 +152,10 @@ class Structure:
             if scales is not None:
                 gain, time_scale = gain * scales[0], time_scale * scales[1]
         return rudder, gain, time_scale
+
+    def yaw_rate_bias(self, params: dict) -> float:
+        """What the yaw-rate sensor reads (rad/s) when the hull does not turn (gyro bias)."""
+        return float(self.measured_yaw_rate(np.zeros(1), params)[0])
 
     def measured_yaw_rate(self, r: np.ndarray, params: dict) -> np.ndarray:
         for effect in self.effects:

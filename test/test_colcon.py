@@ -56,7 +56,7 @@ def test_built_ship_ident_starts_from_the_install_space(workspace):
 
 def test_built_identifier_node_with_the_params_file_starts_and_identifies(workspace, tmp_path):
     """What `ros2 run ship_ident identifier_node --ros-args --params-file ...` starts, fed by play."""
-    from ship_ident.demo import Listener, ros_environment, start_play, stop
+    from ship_ident.demo import Listener, ros_environment, shut_down, start_play
 
     domain = 101  # outside the 1..100 range the other node tests draw from
     env = dict(ros_environment(domain, tmp_path), AMENT_PREFIX_PATH=str(VENV_BIN.parent),
@@ -74,9 +74,7 @@ def test_built_identifier_node_with_the_params_file_starts_and_identifies(worksp
         listener.spin(1.0)
         assert play.returncode == 0, play.stderr.read()
     finally:
-        stop(play)
-        code, log, _ = stop(node)
-        listener.close()
+        code, log = shut_down(node, listener, play)
     assert code == 0, log
     truth = json.loads((share / "bags" / "demo_seed001.truth.json").read_text())["parameters"]
     new = [e for e in listener.estimates if e["new_estimate"]]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from ship_ident.commands.play import Player
-from ship_ident.demo import Listener, ros_environment, start_node, start_play, stop
+from ship_ident.demo import Listener, ros_environment, shut_down, start_node, start_play
 from ship_ident.io import write_simulation
 from ship_ident.simulator import simulate
 
@@ -59,9 +59,7 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
         assert play.returncode == 0, play.stderr.read()
         assert node.poll() is None
     finally:
-        stop(play)
-        code, log, _ = stop(node)
-        listener.close()
+        code, log = shut_down(node, listener, play)
     assert code == 0, log
     final = final_estimate(listener)
     assert final["stamp"] > 280.0 and final["status"] in ("OK", "WARN"), final["conditions"]
@@ -113,9 +111,7 @@ def test_effects_change_at_run_time(env, domain_id, bag):
         listener.spin(1.0)
         assert node.poll() is None
     finally:
-        stop(play)
-        code, log, _ = stop(node)
-        listener.close()
+        code, log = shut_down(node, listener, play)
     assert code == 0, log
     after = final_estimate(listener)
     assert "delta_r" not in after["parameters"] and "r_bias" in after["parameters"]
@@ -167,8 +163,7 @@ def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
         listener.spin(1.0)
         assert node.poll() is None
     finally:
-        code, log, _ = stop(node)
-        listener.close()
+        code, log = shut_down(node, listener)
     assert code == 0, log
     reported = {}
     for status in listener.diagnostics:
@@ -225,8 +220,7 @@ def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id,
         listener.spin(1.0)
         assert node.poll() is None
     finally:
-        code, log, _ = stop(node)
-        listener.close()
+        code, log = shut_down(node, listener)
         if other is not None:
             other.close()
     assert code == 0, log

@@ -1,6 +1,5 @@
 """The bad-input catalogue of docs/reliability.md: replay's one-line errors, heading wraps, and that
 every test the catalogue names exists."""
-import math
 import re
 from pathlib import Path
 

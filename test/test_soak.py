@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ship_ident.commands.play import Player
-from ship_ident.demo import Listener, start_node, stop
+from ship_ident.demo import Listener, shut_down, start_node
 from ship_ident.simulator import simulate
 
 from test_node import domain_id, env  # noqa: F401  (fixtures)
@@ -55,8 +55,7 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
         rss["end"] = rss_mib(node.pid)
         assert node.poll() is None
     finally:
-        code, log, _ = stop(node)
-        listener.close()
+        code, log = shut_down(node, listener)
     assert code == 0, log
     records = listener.estimates
     sent = 3 * len(d.time)

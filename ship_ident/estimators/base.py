@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..dataset import DataError, Dataset
+from ..integrate import substeps_for
 from ..metrics import effective_sample_fraction, free_run_fit
 from ..signals import Signals, compute_signals, noise_level
 from ..structure import Regression, Structure
@@ -96,8 +97,7 @@ def excitation_flags(dataset: Dataset) -> list[str]:
 def fit_substeps(h: float, params: dict) -> int:
     """RK4 substeps per sample for fitting and fit figures: step at most 2/3 of the fastest
     time constant (free-run error ~1e-5 deg on seed 001's vessel, far below sensor noise)."""
-    fastest = min(params[n] for n in ("T", "T1", "T2") if n in params)
-    return int(min(200, max(1, np.ceil(1.5 * h / max(fastest, 1e-3)))))
+    return substeps_for(h, min(params[n] for n in ("T", "T1", "T2") if n in params), 1.5)
 
 
 def finish_estimate(structure: Structure, dataset: Dataset, method: str, params: dict,

@@ -207,7 +207,7 @@ class OutputError(Estimator):
         shots = replace(dataset, segments=intervals)
         weigh = self.residual_weighting(structure, dataset, params0, s_psi, s_r, intervals)
         n_state = 3 if structure.order == 2 else 2
-        bias0 = structure.measured_yaw_rate(np.zeros(1), params0)[0]
+        bias0 = structure.yaw_rate_bias(params0)
         states0 = np.array([[dataset.heading[a], dataset.yaw_rate[a] - bias0, 0.0][:n_state]
                             for a, _ in intervals])
         fixed = {n: params0[n] for n in structure.fixed_names}

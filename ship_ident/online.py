@@ -28,7 +28,7 @@ import numpy as np
 
 from .jsonio import dumps_json
 from .dataset import DataError, resample_series
-from .estimators import MethodError, make_estimator
+from .estimators import DEFAULT_METHOD, MethodError, make_estimator
 from .estimators.base import MIN_RUDDER_STD
 from .io import ROLES, Sample, Topics
 from .structure import Structure, StructureError
@@ -113,7 +113,7 @@ class OnlineConfig:
     refit_period: float = 5.0             # s between refits
     model: str = "nomoto2"
     effects: tuple = ("rudder_offset", "cubic_yaw")
-    method: str = "rwlssvm+oe"
+    method: str = DEFAULT_METHOD
     min_window_length: float = 60.0       # s of data before the first fit
     min_rudder_std: float = float(MIN_RUDDER_STD)  # rad: less rudder activity gives no new estimate
     min_fit_correlation: float = 0.8      # free-run yaw-rate correlation below this is a poor fit

@@ -2,8 +2,7 @@
 
 Model: measured heading psi_k = psi(t_k; theta) + e_psi, yaw rate
 r_k = r(t_k; theta) + e_r, white Gaussian noise of known std s_psi (rad),
-s_r (rad/s); the rudder is taken as known (its noise is not in the bound).
-The Fisher information is
+s_r (rad/s). With a known rudder the Fisher information is
 
     F = S_psi' S_psi / s_psi^2 + S_r' S_r / s_r^2,
 
@@ -13,13 +12,32 @@ the free physical parameters and, as nuisance, the initial heading, yaw
 rate and yaw acceleration of the record; the bound is the parameter block
 of F^-1. A derived quantity g(theta) (e.g. T1 + T2 - T3) has the bound
 grad(g)' F^-1 grad(g).
+
+With rudder-sensor noise of std s_delta the simulation runs on the measured
+rudder and the output error is no longer white: it adds the hull's response
+to the rudder noise (``innovations.py``; the measured rudder is treated as
+the input and its noise as independent of it, the Berkson view, exact to
+O(s_delta^2 / var(delta)), here 1e-4). The error is Gaussian with a
+theta-dependent covariance Sigma, and
+
+    F = S' Sigma^-1 S + 1/2 tr(Sigma^-1 dSigma Sigma^-1 dSigma):
+
+the first term by whitening every sensitivity column with the Kalman
+innovation filter of the true model, the second, the information in the
+noise's own spectrum (a few percent of the total here), by Whittle's
+frequency-domain formula. This is the bound for the records the estimators
+actually get; the known-rudder bound is lower and unattainable with them.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..dataset import Dataset
+from ..estimators.base import fit_substeps
+from ..innovations import innovation_filter, noise_model, spectral_fisher_information
 from ..structure import Structure
+
+NOISE_SHAPING = ("K", "T", "T1", "T2", "T3")  # the parameters the linearised noise model depends on
 
 
 def output_sensitivities(structure: Structure, truth: dict, dataset: Dataset, initial: list,
@@ -48,13 +66,50 @@ def output_sensitivities(structure: Structure, truth: dict, dataset: Dataset, in
     return np.column_stack(columns), names
 
 
-def cramer_rao_bound(structure: Structure, truth: dict, dataset: Dataset, initial: list,
-                     heading_noise: float, yaw_rate_noise: float) -> dict:
-    """Lower bounds on the std (SI units) of every free parameter and of ``T1+T2-T3`` (nomoto2)."""
+def _noise_models(structure: Structure, truth: dict, dataset: Dataset, noise: tuple) -> tuple:
+    h = dataset.sample_time
+    substeps = fit_substeps(h, truth)
+
+    def model(params):
+        return noise_model(structure.order, params, h, substeps, *noise)
+
+    slopes = []
+    for name in structure.free_names:
+        if name in NOISE_SHAPING:
+            step = 1e-5 * abs(truth[name])
+            slopes.append((model(dict(truth, **{name: truth[name] + step})),
+                           model(dict(truth, **{name: truth[name] - step})), 2 * step))
+    return model(truth), slopes
+
+
+def fisher_information(structure: Structure, truth: dict, dataset: Dataset, initial: list,
+                       heading_noise: float, yaw_rate_noise: float, rudder_noise: float = 0.0) -> tuple:
+    """Fisher information of theta (free parameters, then the initial states) and theta's names."""
     S, names = output_sensitivities(structure, truth, dataset, initial)
     n = dataset.n_samples
-    weights = np.concatenate([np.full(n, 1 / heading_noise ** 2), np.full(n, 1 / yaw_rate_noise ** 2)])
-    fisher = S.T @ (S * weights[:, None])
+    if rudder_noise == 0.0:
+        weights = np.concatenate([np.full(n, 1 / heading_noise ** 2), np.full(n, 1 / yaw_rate_noise ** 2)])
+        return S.T @ (S * weights[:, None]), names
+    model, slopes = _noise_models(structure, truth, dataset, (rudder_noise, heading_noise, yaw_rate_noise))
+    kalman = innovation_filter(model)
+    whitened = np.empty((n, 2, S.shape[1]))
+    for j in range(S.shape[1]):
+        series = np.column_stack([S[:n, j], S[n:, j]])
+        for a, b in dataset.segments:
+            whitened[a:b, :, j] = kalman.whiten(series[a:b])
+    whitened = whitened.reshape(2 * n, -1)
+    fisher = whitened.T @ whitened
+    shaping = [i for i, name in enumerate(structure.free_names) if name in NOISE_SHAPING]
+    fisher[np.ix_(shaping, shaping)] += spectral_fisher_information(model, slopes, n)
+    return fisher, names
+
+
+def cramer_rao_bound(structure: Structure, truth: dict, dataset: Dataset, initial: list,
+                     heading_noise: float, yaw_rate_noise: float, rudder_noise: float = 0.0) -> dict:
+    """Lower bounds on the std (SI units) of every free parameter and of ``T1+T2-T3`` (nomoto2);
+    ``dataset`` carries the true rudder (the sensitivities), ``rudder_noise`` its sensor noise."""
+    fisher, names = fisher_information(structure, truth, dataset, initial, heading_noise, yaw_rate_noise,
+                                       rudder_noise)
     cov = np.linalg.inv(fisher)
     p = len(structure.free_names)
     bound = {name: float(np.sqrt(cov[i, i])) for i, name in enumerate(structure.free_names)}

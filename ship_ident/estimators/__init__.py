@@ -12,7 +12,7 @@ from .weighted import RWLSSVM
 
 ESTIMATORS = {cls.name: cls for cls in (OLS, LSSVM, RLSSVM, RWLSSVM, TLSSVM)}
 REFINEMENTS = {"oe": OutputError, "pem": PredictionError}
-DEFAULT_METHOD = "rwlssvm+oe"
+DEFAULT_METHOD = "rwlssvm+pem"
 
 
 class MethodError(ValueError):

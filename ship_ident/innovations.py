@@ -1,0 +1,164 @@
+"""Rudder-sensor noise as input noise: its linear noise model and Kalman innovations.
+
+A measured rudder angle d_m,k = d_k + n_k (n white, std s_delta, rad) drives
+a free-run simulation with the wrong input. Between samples the rudder is
+linear (first-order hold), so the simulated state's error obeys, for the
+Nomoto model linearised at rest,
+
+    x_{k+1} = A x_k + b0 n_k + b1 n_{k+1},    u_k = C x_k + v_k,
+
+with x = (psi, r[, z]), A the one-sample transition, b0 and b1 the responses
+to a unit rudder ramp down and up over one sample, C picking heading and yaw
+rate, and v the white sensor noise of std (s_psi, s_r). The moving-average
+input is made Markov by xi_k = x_k - b1 n_k:
+
+    xi_{k+1} = A xi_k + g n_k,  g = A b1 + b0,    u_k = C xi_k + C b1 n_k + v_k,
+
+a state-space model whose process and measurement noises are correlated.
+Its steady-state Kalman predictor turns the free-run error series u into
+white innovations e_k with covariance S; ``whiten`` returns S^-1/2 e_k.
+The prediction-error estimator and the Cramer-Rao bound with a noisy rudder
+both stand on this model.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.linalg import solve_discrete_are
+
+from .integrate import advance
+
+_NO_FORCING = (np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+               np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """The linearised hull driven by rudder noise (see the module docstring; SI units)."""
+
+    A: np.ndarray        # one-sample transition of (psi, r[, z])
+    b0: np.ndarray       # state response to a unit rudder error at the start of a sample (FOH)
+    b1: np.ndarray       # ... at its end
+    rudder_noise: float  # rad
+    heading_noise: float  # rad
+    yaw_rate_noise: float  # rad/s
+
+    @property
+    def C(self) -> np.ndarray:
+        return np.eye(2, self.A.shape[0])
+
+    def transfer(self, omega: np.ndarray) -> np.ndarray:
+        """Response H(e^{i omega}) of (heading, yaw rate) to the rudder noise, shape (len(omega), 2)."""
+        n = self.A.shape[0]
+        z = np.exp(1j * np.asarray(omega))
+        resolvent = np.linalg.inv(z[:, None, None] * np.eye(n) - self.A)
+        drive = self.b0[None, :] + z[:, None] * self.b1[None, :]
+        return np.einsum("ij,wjk,wk->wi", self.C, resolvent, drive)
+
+
+def noise_model(order: int, params: dict, h: float, substeps: int, rudder_noise: float,
+                heading_noise: float, yaw_rate_noise: float) -> NoiseModel:
+    """Linearise the compiled integrator at rest (exact: the model is linear there) for one
+    sample of length h (s)."""
+    K = params["K"]
+    T1 = params["T"] if order == 1 else params["T1"]
+    T2 = 0.0 if order == 1 else params["T2"]
+    T3 = 0.0 if order == 1 else params["T3"]
+    n = 2 if order == 1 else 3
+
+    def step(state, d0, d1):
+        psi, r, z = (list(state) + [0.0])[:3]
+        return np.array(advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, *_NO_FORCING, substeps))[:n]
+
+    zero = np.zeros(n)
+    A = np.column_stack([step(np.eye(n)[i], 0.0, 0.0) for i in range(n)])
+    return NoiseModel(A=A, b0=step(zero, 1.0, 0.0), b1=step(zero, 0.0, 1.0), rudder_noise=rudder_noise,
+                      heading_noise=heading_noise, yaw_rate_noise=yaw_rate_noise)
+
+
+@dataclass(frozen=True)
+class InnovationFilter:
+    """Steady-state Kalman predictor xi_{k+1} = A xi_k + L e_k, e_k = u_k - C xi_k, cov(e) = S."""
+
+    A: np.ndarray
+    gain: np.ndarray
+    C: np.ndarray
+    s_inv_sqrt: np.ndarray
+
+    def whiten(self, errors: np.ndarray) -> np.ndarray:
+        """S^-1/2 e_k (N x 2) of a free-run error series (N x 2, heading and yaw rate), predictor
+        started at zero (the series starts from a known state)."""
+        return _whiten(self.A, self.gain, self.C, self.s_inv_sqrt, np.ascontiguousarray(errors, dtype=float))
+
+
+def innovation_filter(model: NoiseModel) -> InnovationFilter:
+    """Solve the filter Riccati equation of the correlated-noise model (scipy's DARE, cross term s)."""
+    A, C, n = model.A, model.C, model.A.shape[0]
+    s2 = model.rudder_noise ** 2
+    g = A @ model.b1 + model.b0
+    feedthrough = C @ model.b1
+    R = np.diag([model.heading_noise ** 2, model.yaw_rate_noise ** 2]) + s2 * np.outer(feedthrough, feedthrough)
+    cross = s2 * np.outer(g, feedthrough)
+    if s2 == 0.0:   # sensor noise only: no state to track, the innovations are the errors
+        P = np.zeros((n, n))
+    else:
+        P = solve_discrete_are(A.T, C.T, s2 * np.outer(g, g) + 1e-14 * np.eye(n), R, s=cross)
+    S = C @ P @ C.T + R
+    gain = (A @ P @ C.T + cross) @ np.linalg.inv(S)
+    evals, evecs = np.linalg.eigh(S)
+    return InnovationFilter(A=A, gain=gain, C=C, s_inv_sqrt=evecs @ np.diag(evals ** -0.5) @ evecs.T)
+
+
+@njit(cache=True)
+def _whiten(A, gain, C, s_inv_sqrt, errors):
+    n, m = errors.shape[0], A.shape[0]
+    x = np.zeros(m)
+    x_next = np.zeros(m)
+    out = np.empty((n, 2))
+    for k in range(n):
+        e0, e1 = errors[k, 0], errors[k, 1]
+        for i in range(m):
+            e0 -= C[0, i] * x[i]
+            e1 -= C[1, i] * x[i]
+        out[k, 0] = s_inv_sqrt[0, 0] * e0 + s_inv_sqrt[0, 1] * e1
+        out[k, 1] = s_inv_sqrt[1, 0] * e0 + s_inv_sqrt[1, 1] * e1
+        for i in range(m):
+            v = gain[i, 0] * e0 + gain[i, 1] * e1
+            for j in range(m):
+                v += A[i, j] * x[j]
+            x_next[i] = v
+        x, x_next = x_next, x
+    return out
+
+
+def spectral_fisher_information(model: NoiseModel, slopes: list, n_samples: int,
+                                n_frequencies: int = 4096) -> np.ndarray:
+    """Whittle's Fisher information carried by the noise's spectrum alone,
+
+        F_ij = (N / 2) mean_omega tr(Phi^-1 dPhi_i Phi^-1 dPhi_j),
+
+    for the stationary error of (heading increment, yaw rate), Phi(omega) = s_delta^2 D H H^* D^*
+    + diag(s_psi^2 |1 - e^{-i omega}|^2, s_r^2), D = diag(1 - e^{-i omega}, 1) (differencing the
+    heading makes the rudder-noise walk stationary without changing the information).
+    ``slopes`` holds, per parameter theta_j, (model at theta_j + step, model at theta_j - step,
+    2 step): dPhi_j by central difference."""
+    omega = (np.arange(n_frequencies) + 0.5) * 2 * np.pi / n_frequencies
+    diff = np.stack([1 - np.exp(-1j * omega), np.ones_like(omega)], axis=1)
+
+    def spectrum(m: NoiseModel) -> np.ndarray:
+        H = diff * m.transfer(omega)
+        out = m.rudder_noise ** 2 * np.einsum("wi,wj->wij", H, H.conj())
+        out[:, 0, 0] += m.heading_noise ** 2 * np.abs(diff[:, 0]) ** 2
+        out[:, 1, 1] += m.yaw_rate_noise ** 2
+        return out
+
+    inverse = np.linalg.inv(spectrum(model))
+    scaled = [inverse @ ((spectrum(plus) - spectrum(minus)) / width) for plus, minus, width in slopes]
+    p = len(slopes)
+    F = np.zeros((p, p))
+    for i in range(p):
+        for j in range(i, p):
+            F[i, j] = F[j, i] = 0.5 * n_samples * float(np.mean(np.einsum("wij,wji->w", scaled[i], scaled[j]).real))
+    return F

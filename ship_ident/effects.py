@@ -119,6 +119,11 @@ class Effect:
         """This effect's parameters from its regression coefficients and the base model's."""
         return {p.name: p.initial for p in self.parameters}
 
+    def neutral(self) -> dict:
+        """Values of the free parameters at which the effect does nothing: the model without it,
+        where a fit with the effect can start (every effect here vanishes at zero)."""
+        return {p.name: 0.0 for p in self.parameters if p.name not in getattr(self, "fixed", ())}
+
     # --- diagnosis --------------------------------------------------------
     def evidence(self, context) -> Evidence:
         """Signature of this effect in the free-run residual (see diagnose.ResidualContext)."""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import html
+from dataclasses import replace
 from pathlib import Path
 
 import matplotlib
@@ -30,30 +31,36 @@ def _segments_plot(ax, dataset, values, label, **style):
 
 
 def plot_measured_vs_model(d: Diagnosis, directory: Path) -> str:
-    """Measured and free-run heading and yaw rate, held-out windows and worst segments shaded."""
+    """Measured and free-run heading and yaw rate, held-out windows and worst segments shaded;
+    held-out recordings (cross-manoeuvre) are drawn after the fitted one, 60 s apart."""
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     train_psi, train_r = d.structure.simulate(d.estimate.parameters, d.training)
+    shift = d.dataset.time[-1] + 60.0 - d.held_out.time[0] if d.cross_manoeuvre else 0.0
+    held_out = replace(d.held_out, time=d.held_out.time + shift)
     for ax, scale, label, measured, train, held in (
             (axes[0], DEG, "heading (deg)", "heading", train_psi, d.run.heading),
             (axes[1], DEG, "yaw rate (deg/s)", "yaw_rate", train_r, d.run.yaw_rate)):
-        for k, (a, b) in enumerate(d.held_out.segments):
-            ax.axvspan(d.held_out.time[a], d.held_out.time[b - 1], color="tab:blue", alpha=0.08, lw=0,
+        for k, (a, b) in enumerate(held_out.segments):
+            ax.axvspan(held_out.time[a], held_out.time[b - 1], color="tab:blue", alpha=0.08, lw=0,
                        label="held-out window" if k == 0 else None)
         for k, seg in enumerate(d.worst_segments):
             ax.axvspan(seg["start"], seg["end"], ymin=0.0, ymax=0.04, color="tab:orange", alpha=0.9, lw=0,
                        label=f"worst {len(d.worst_segments)} segments" if k == 0 else None)
         ax.plot(d.dataset.time, getattr(d.dataset, measured) * scale, color="black", lw=0.8, label="measured")
+        if d.cross_manoeuvre:
+            _segments_plot(ax, held_out, getattr(held_out, measured) * scale, None, color="black", lw=0.8)
         _segments_plot(ax, d.training, train * scale, "model, fitting part (in-sample)",
                        color="tab:gray", lw=0.9)
-        _segments_plot(ax, d.held_out, held * scale, "model, held-out free run", color="tab:blue", lw=1.2)
+        _segments_plot(ax, held_out, held * scale, "model, held-out free run", color="tab:blue", lw=1.2)
         if d.before_run is not None:
-            _segments_plot(ax, d.held_out, getattr(d.before_run, measured) * scale,
+            _segments_plot(ax, held_out, getattr(d.before_run, measured) * scale,
                            f"before: {d.before.structure.label()}", color="tab:red", lw=0.8, ls="--")
         ax.set_ylabel(label)
     axes[0].legend(fontsize=7, loc="best", ncol=2)
     axes[0].set_title(f"{d.structure.label()}: free runs, each window from the measured state "
                       "(orange ticks: worst segments)", fontsize=9)
-    axes[1].set_xlabel("time (s)")
+    axes[1].set_xlabel("time (s)" + (f"; held-out recordings from {shift + d.held_out.time[0]:.0f} s"
+                                     if d.cross_manoeuvre else ""))
     return _save(fig, directory, "measured_vs_model.png")
 
 

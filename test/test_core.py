@@ -1,4 +1,6 @@
 """The numeric core against exact solutions: integrator, resampling, structure."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -34,6 +36,28 @@ def test_nomoto2_matches_lti_simulation_with_first_order_hold():
     fine = np.arange(0, 60 - h + 1e-9, 0.001)
     _, r_exact, _ = signal.lsim(system, np.interp(fine, time, rudder), fine)
     assert np.max(np.abs(r[:-1] - np.interp(time[:-1], fine, r_exact))) < 2e-5 * np.max(np.abs(r))
+
+
+def test_runs_side_by_side_equal_one_run_per_segment():
+    """The vector path (several runs and segments as lanes) against the scalar one (one lane per call),
+    with forcing terms of every kind, and a run that blows up: NaN from the same sample on."""
+    sim = simulate("mixed", "seed001", effects=["rudder_offset", "cubic_yaw", "wind_yaw"], duration=120, seed=2)
+    data, structure = sim.dataset, Structure("nomoto2", ["rudder_offset", "cubic_yaw", "wind_yaw"])
+    shots = replace(data, segments=((0, 300), (300, 700), (700, 701), (701, data.n_samples)))
+    truth = {n: sim.truth[n] for n in structure.parameter_names}
+    runs = [truth, dict(truth, K=0.8, T2=0.3, alpha=-0.5), dict(truth, alpha=-3000.0)]
+    initials = [[(data.heading[a], data.yaw_rate[a] + 0.01 * k, 0.002 * k) for a, _ in shots.segments]
+                for k in range(len(runs))]
+    psi, r = structure.simulate_runs(runs, shots, initials, substeps=3)
+    for params, initial, psi_run, r_run in zip(runs, initials, psi, r):
+        for (a, b), state in zip(shots.segments, initial):
+            alone = replace(data, segments=((a, b),))
+            psi_one, r_one = structure.simulate(params, alone, initial=[state], substeps=3)
+            np.testing.assert_allclose(psi_run[a:b], psi_one[a:b], rtol=1e-9, atol=1e-12)  # NaN included
+            np.testing.assert_allclose(r_run[a:b], r_one[a:b], rtol=1e-9, atol=1e-12)
+    blown = np.flatnonzero(np.isnan(psi[2, 701:]))
+    assert 0 < blown[0] and np.all(np.diff(blown) == 1) and blown[-1] == data.n_samples - 702
+    assert not np.any(np.isnan(psi[:2]))
 
 
 def test_simulated_heading_is_wrapped_but_dataset_unwrapped():

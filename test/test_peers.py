@@ -24,7 +24,7 @@ def test_peers_is_registered_with_plots():
 
 
 def test_our_accuracy_and_the_peers_give_finite_results(accuracy):
-    ours = accuracy["ship_ident rwlssvm+oe"]["quantities"]
+    ours = accuracy[peers.OURS_LABEL]["quantities"]
     assert ours["K"]["rms_percent"] < 1.0
     assert ours["T1"]["rms_percent"] < 3.0
     assert ours["delta_r"]["rms_percent"] < 5.0
@@ -35,11 +35,11 @@ def test_our_accuracy_and_the_peers_give_finite_results(accuracy):
     for name, method in accuracy.items():
         assert math.isfinite(method["rmse_heading_deg"]) and method["rmse_heading_deg"] > 0, name
     floor = accuracy["truth"]["rmse_heading_deg"]
-    assert accuracy["ship_ident rwlssvm+oe"]["rmse_heading_deg"] < 2 * floor
+    assert accuracy[peers.OURS_LABEL]["rmse_heading_deg"] < 2 * floor
 
 
 def test_tracking_recovers_within_a_window_and_the_peers_track(tracking):
-    ours = tracking["methods"]["ship_ident rwlssvm+oe"]
+    ours = tracking["methods"][peers.OURS_LABEL]
     assert ours["recovery_s"] < 2 * tracking["window_s"]  # the target (one window + one period) is the bench's
     assert ours["error_before_percent"] < 2.0
     for name, method in tracking["methods"].items():

@@ -14,7 +14,7 @@ Peers (real libraries where one exists, not re-implementations):
   (heading integrated); a black box without physical parameters.
 * ``lssvm-dual``: the seed's plain LS-SVM solved in the N x N dual with
   bias (rows thinned to 3000: the dual is O(N^3)).
-* ours: ``rwlssvm`` and ``rwlssvm+oe`` (the node's default).
+* ours: ``rwlssvm+pem`` (the node's default), ``rwlssvm+oe`` and ``rwlssvm``.
 
 Accuracy: seed 001's vessel (nomoto2 + rudder offset + cubic yaw), mixed
 manoeuvre, realistic sensor noise (``simulator.Noise()``), several noise
@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..estimators import make_estimator
+from ..estimators import DEFAULT_METHOD, make_estimator
 from ..estimators.lssvm import lssvm_dual_with_bias
 from ..integrate import advance, initial_z
 from ..io import Sample, Topics, write_simulation
@@ -64,7 +64,7 @@ from .efficiency import QUANTITIES, _with_derived, record_bound, summarise
 STRUCTURE = Structure("nomoto2", ["rudder_offset", "cubic_yaw"])
 PARAMETERS = STRUCTURE.parameter_names
 ONLINE = OnlineConfig()                 # the node's defaults: window, refit period, method
-OURS = ("rwlssvm+oe", "rwlssvm")
+OURS = (DEFAULT_METHOD, "rwlssvm+oe", "rwlssvm")
 UKF_START_S = 60.0                      # s of data behind the UKF's initial OLS fit
 DUAL_MAX_ROWS = 3000
 INPUT_RATE_HZ = 10.0

@@ -19,7 +19,7 @@ from ..simulator import simulate
 from . import progress, register
 from .common import relative_error_percent, table
 
-METHODS = ("lssvm", "rlssvm", "rwlssvm", "tlssvm", "rwlssvm+oe")
+METHODS = ("lssvm", "rlssvm", "rwlssvm", "tlssvm", "rwlssvm+oe", "rwlssvm+pem")
 PARAMETERS = ("T1", "T2", "T3", "K", "alpha", "delta_r")
 # seed 001, Table 2: relative errors (%) of its columns; beta there is our alpha
 PAPER_TABLE2 = {

@@ -5,7 +5,7 @@ import math
 import sys
 import time
 
-from ..diagnose import DEFAULT_METHOD, covered, diagnose
+from ..diagnose import DEFAULT_METHOD, covered, diagnose, join_recordings
 from ..structure import parse_effects, require_samples
 from ..jsonio import dumps_json
 from .common import add_data_args, add_json_arg, add_model_args, load_data
@@ -23,9 +23,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("data", metavar="DATA", help="rosbag2 directory, .mcap file or CSV file")
     add_model_args(parser)
     parser.set_defaults(method=DEFAULT_METHOD)
-    parser.add_argument("--validate", metavar="OTHER",
+    parser.add_argument("--validate", metavar="OTHER", action="append",
                         help="hold out this other recording (bag or CSV) instead of the tail of DATA, "
-                             "and fit on all of DATA: cross-manoeuvre validation")
+                             "and fit on all of DATA: cross-manoeuvre validation (repeat for more "
+                             "recordings: each is its own set of free runs, the test pools them)")
     parser.add_argument("--report", metavar="DIR", help="write an HTML report with plots to DIR/index.html")
     parser.add_argument("--workers", type=int, default=None, metavar="N",
                         help="processes for the candidate refits (default: CPU count)")
@@ -42,25 +43,30 @@ def run(args) -> int:
 
     dataset = load_data(args, args.data)
     require_samples(dataset)
-    validation = load_data(args, args.validate) if args.validate else None
+    validation = join_recordings([load_data(args, path) for path in args.validate]) if args.validate else None
     result = diagnose(dataset, args.model, parse_effects(args.effects), args.method,
                       progress=progress, workers=args.workers, validation=validation)
     if args.report:
         from ..report import write_report
         progress(f"writing the report to {args.report}")
-        path = write_report(result, args.report, source=str(args.data))
+        held_out = f" (held out: {', '.join(args.validate)})" if args.validate else ""
+        path = write_report(result, args.report, source=f"{args.data}{held_out}")
         progress(f"report: {path}")
-    record = dict(result.to_json(), data=str(args.data))
-    print(dumps_json(record) if args.json else format_diagnosis(result, args.data))
+    record = dict(result.to_json(), data=str(args.data), validate=list(args.validate or ()))
+    options = "".join([f" --validate {v}" for v in args.validate or ()]
+                      + [f" --sample-time {args.sample_time:g}"])
+    print(dumps_json(record) if args.json else format_diagnosis(result, args.data, options))
     return 0
 
 
-def format_diagnosis(result, source) -> str:
-    """Readable summary: held-out fit, before/after, worst segments, residual tests, candidates."""
+def format_diagnosis(result, source, options: str = "") -> str:
+    """Readable summary: held-out fit, before/after, worst segments, residual tests, candidates;
+    ``options`` are repeated in the suggested next command."""
     fit = result.run.fit
     lines = [f"{result.structure.label()} fitted on {covered(result.training):.0f} s of {source}, "
              f"run free on {covered(result.held_out):.0f} s held out "
-             f"({len(result.held_out.segments)} free runs from the measured state)",
+             f"({'other recordings; ' if result.cross_manoeuvre else ''}"
+             f"{len(result.held_out.segments)} free runs from the measured state)",
              f"  held-out free-run: heading RMSE {fit['rmse_heading'] * DEG:.3g} deg "
              f"(fit {fit['fit_percent_heading']:.1f} %), yaw rate RMSE {fit['rmse_yaw_rate'] * DEG:.3g} deg/s "
              f"(fit {fit['fit_percent_yaw_rate']:.1f} %); yaw-rate noise floor "
@@ -97,5 +103,5 @@ def format_diagnosis(result, source) -> str:
     if result.verdict == "missing_effect":
         top = result.candidates[0].effect
         effects = ",".join(result.structure.effect_names + (top,))
-        lines.append(f"next: ship-ident diagnose {source} --model {result.structure.model} --effects {effects}")
+        lines.append(f"next: ship-ident diagnose {source} --model {result.structure.model} --effects {effects}{options}")
     return "\n".join(lines)

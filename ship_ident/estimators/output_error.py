@@ -25,7 +25,8 @@ information to the extra initial states, 60 s or one long interval is
 biased by the walk and the long-horizon cost is harder to optimise).
 The Jacobian is a forward difference with one simulation per physical
 parameter plus one per state component (the intervals' states touch
-disjoint residuals, so they are perturbed together). Standard errors are
+disjoint residuals, so they are perturbed together), all run side by side in
+one compiled call (``Structure.simulate_runs``). Standard errors are
 Newey-West (sandwich) ones, honest under the residual autocorrelation that
 remains (``parameter_std_errors``). Residuals beyond 5 robust standard
 deviations of the start's residual get Huber weights, so that sensor spikes
@@ -36,6 +37,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import sparse
+from scipy.signal import convolve
 
 from ..dataset import Dataset
 from ..signals import noise_level
@@ -45,6 +48,7 @@ from .base import Estimate, Estimator, finish_estimate, fit_substeps
 MAX_INTERVALS = 64          # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
 MIN_INTERVAL_SAMPLES = 50   # shorter intervals are not split further
+SPARSE_INTERVALS = 12       # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
 
 
 def shooting_intervals(segments, samples_per_interval: int) -> tuple[tuple[int, int], ...]:
@@ -74,8 +78,8 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
     projection (a parameter at a bound whose gradient points outward is held there).
 
     The normal equations are (p x p) with p the unknowns, so an iteration costs the
-    Jacobian's simulations and almost nothing else. It stops when a step gains less than
-    ``tolerance`` of the cost (far below the chi-square scatter of the cost, 1/sqrt(N)) or less
+    Jacobian's simulations and almost nothing else (``jacobian`` may return a scipy sparse
+    matrix). It stops when a step gains less than ``tolerance`` of the cost (far below the chi-square scatter of the cost, 1/sqrt(N)) or less
     than ``CHI_SQUARE_TOLERANCE``: the residuals are in noise units, so such a step moves the
     parameters by a tenth of a standard error or less.
     """
@@ -85,7 +89,7 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
     lam, converged = 1e-3, False
     J = jacobian(x, f)
     for iteration in range(1, max_iterations + 1):
-        g, A = J.T @ f, J.T @ J
+        g, A = J.T @ f, _dense(J.T @ J)
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         d = np.maximum(np.diag(A)[free], 1e-12)
         improved = False
@@ -117,23 +121,28 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
     return LeastSquaresResult(x=x, fun=f, jac=J, iterations=iteration, success=converged)
 
 
-def parameter_std_errors(J: np.ndarray, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> np.ndarray:
+def _dense(a) -> np.ndarray:
+    return a.toarray() if sparse.issparse(a) else a
+
+
+def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> np.ndarray:
     """Heteroscedasticity-and-autocorrelation-consistent (Newey-West) standard errors of the
     first ``p`` unknowns: bread (J'J)^-1, meat the Bartlett-weighted long-run covariance of
     the per-sample scores J_k' f_k (heading and yaw-rate rows of one sample summed), lags up
     to ``bandwidth`` samples (one shooting interval: residuals of different intervals are
     nearly independent). Only the parameter rows of the bread are needed, so the long-run
-    covariance is taken of the p-dimensional projected scores."""
+    covariance is taken of the p-dimensional projected scores: u' W u with W the Toeplitz
+    matrix of the Bartlett weights, W u one convolution (FFT for long lag windows), so the
+    cost is linear in the samples. ``J`` may be a scipy sparse matrix."""
     try:
-        bread = np.linalg.pinv(J.T @ J)[:p]
+        bread = np.linalg.pinv(_dense(J.T @ J))[:p]
     except np.linalg.LinAlgError:
         return np.full(p, np.inf)
-    scores = J[:n_samples] * f[:n_samples, None] + J[n_samples:] * f[n_samples:, None]
-    u = scores @ bread.T
-    meat = u.T @ u
-    for lag in range(1, min(bandwidth, n_samples - 1) + 1):
-        gamma = u[:-lag].T @ u[lag:]
-        meat += (1.0 - lag / (bandwidth + 1.0)) * (gamma + gamma.T)
+    projected = np.asarray(J @ bread.T)
+    u = projected[:n_samples] * f[:n_samples, None] + projected[n_samples:] * f[n_samples:, None]
+    lags = np.arange(-min(bandwidth, n_samples - 1), min(bandwidth, n_samples - 1) + 1)
+    bartlett = 1.0 - np.abs(lags) / (bandwidth + 1.0)
+    meat = u.T @ convolve(u, bartlett[:, None], mode="same")
     return np.sqrt(np.clip(np.diag(meat), 0, None))
 
 
@@ -195,7 +204,10 @@ class OutputError(Estimator):
                 conservative[i] = structure.parameter(name).initial
         return [x0, conservative]
 
-    def refine(self, structure: Structure, dataset: Dataset, first: Estimate) -> Estimate:
+    def refine(self, structure: Structure, dataset: Dataset, first: Estimate, starts=()) -> Estimate:
+        """Minimise the free-run error from ``first`` (and its conservative variant) or from any of
+        ``starts`` (further parameter sets, e.g. the fit of the model without its last effect),
+        whichever simulates closest to the data."""
         names = structure.free_names
         p = len(names)
         lower, upper = structure.bounds(names)
@@ -222,39 +234,60 @@ class OutputError(Estimator):
         simulations = 0
         robust = np.ones(2 * dataset.n_samples)  # Huber weights (square roots), fixed at the start
 
-        def residual(x):
+        def residuals(points, substeps):
+            """Weighted residual vectors of several points (rows), simulated in one compiled call."""
             nonlocal simulations
-            simulations += 1
-            params, initial = unpack(x)
-            psi, r = structure.simulate(params, shots, initial=initial, substeps=fit_substeps(h, params))
-            psi_err, r_err = psi - dataset.heading, r - dataset.yaw_rate
-            if not (np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err))):
-                return np.full(2 * dataset.n_samples, 1e6)
-            return robust * weigh(psi_err, r_err)
+            simulations += len(points)
+            runs = [unpack(x) for x in points]
+            psi, r = structure.simulate_runs([q for q, _ in runs], shots, [i for _, i in runs], substeps)
+            out = np.full((len(points), 2 * dataset.n_samples), 1e6)
+            for k in range(len(points)):
+                psi_err, r_err = psi[k] - dataset.heading, r[k] - dataset.yaw_rate
+                if np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err)):
+                    out[k] = robust * weigh(psi_err, r_err)
+            return out
+
+        def residual(x):
+            return residuals([x], fit_substeps(h, unpack(x)[0]))[0]
+
+        owner = np.zeros(dataset.n_samples, dtype=np.int64)  # shooting interval of each sample
+        for i, (a, b) in enumerate(intervals):
+            owner[a:b] = i
+        columns = np.empty((2 * dataset.n_samples, p + n_state), dtype=np.int64)  # of J's nonzeros
+        columns[:, :p] = np.arange(p)
+        columns[:, p:] = p + n_state * np.concatenate([owner, owner])[:, None] + np.arange(n_state)
 
         def jacobian(x, f0):
-            """Forward differences: one column per parameter, one grouped pass per state component."""
-            J = np.zeros((len(f0), len(x)))
+            """Forward differences, all simulated in one call at the substeps of ``x``: one run per
+            parameter, one per state component (the intervals' states touch disjoint rows)."""
             steps = 1e-6 * np.maximum(np.abs(x), 1e-2)
+            points = []
             for j in range(p):
                 xs = x.copy()
                 xs[j] += steps[j] if x[j] + steps[j] <= upper[j] else -steps[j]
-                J[:, j] = (residual(xs) - f0) / (xs[j] - x[j])
+                points.append(xs)
             for c in range(n_state):
-                cols = p + c + n_state * np.arange(len(intervals))
                 xs = x.copy()
-                xs[cols] += steps[cols]
-                diff = residual(xs) - f0
-                for i, (a, b) in enumerate(intervals):
-                    rows = np.r_[a:b, dataset.n_samples + a:dataset.n_samples + b]
-                    J[rows, cols[i]] = diff[rows] / steps[cols[i]]
+                xs[p + c::n_state] += steps[p + c::n_state]
+                points.append(xs)
+            diff = residuals(points, fit_substeps(h, unpack(x)[0])) - f0
+            values = np.empty(columns.shape)
+            values[:, :p] = (diff[:p] / (np.array(points)[:, :p].diagonal() - x[:p])[:, None]).T
+            values[:, p:] = diff[p:].T / steps[columns[:, p:]]
+            if len(intervals) > SPARSE_INTERVALS:
+                row_starts = np.arange(0, values.size + 1, p + n_state)
+                return sparse.csr_matrix((values.ravel(), columns.ravel(), row_starts), shape=(len(f0), len(x)))
+            J = np.zeros((len(f0), len(x)))
+            np.put_along_axis(J, columns, values, axis=1)
             return J
 
         lo = np.concatenate([lower, np.full(states0.size, -np.inf)])
         hi = np.concatenate([upper, np.full(states0.size, np.inf)])
-        starts = [np.clip(np.concatenate([s, states0.ravel()]), lo, hi)
-                  for s in self._starts(structure, names, np.array([params0[n] for n in names]), params0)]
-        x0 = min(starts, key=lambda x: float(np.sum(residual(x) ** 2)))
+        guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0) + [
+            np.array([structure.clip_to_bounds(dict(params0, **s))[n] for n in names]) for s in starts]
+        points = [np.clip(np.concatenate([g, states0.ravel()]), lo, hi) for g in guesses]
+        substeps = max(fit_substeps(h, unpack(x)[0]) for x in points)
+        x0 = points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))]
         robust = huber_weights(residual(x0), dataset.n_samples)
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
         params, _ = unpack(result.x)
@@ -262,7 +295,8 @@ class OutputError(Estimator):
                                    bandwidth=self.bandwidth(intervals))
         std_errors = {n: float(s) for n, s in zip(names, std)}
         std_errors.update({n: 0.0 for n in structure.fixed_names})
-        flags = [f for f in first.flags if not f.endswith("_out_of_bounds") and f != "complex_time_constants"]
+        flags = [f for f in first.flags if not f.endswith("_out_of_bounds") and not f.startswith("at_bound:")
+                 and f != "complex_time_constants"]
         at_bound = [n for n, v, l, u in zip(names, result.x, lower, upper)
                     if (np.isfinite(l) and np.isclose(v, l, atol=1e-6 * max(1, abs(l))))
                     or (np.isfinite(u) and np.isclose(v, u, atol=1e-6 * max(1, abs(u))))]

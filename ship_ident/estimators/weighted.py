@@ -25,6 +25,7 @@ import numpy as np
 from .base import RegressionEstimator, Solution
 from .lssvm import column_scales, ridge_primal
 
+CHUNK_ROWS = 4096  # rows of the regression per batched product (the swarm's weights stay in cache)
 BOUNDS = np.array([[0.5, 4.0],    # c1: residuals below c1*s keep full weight
                    [0.5, 8.0],    # c2 - c1: width of the down-weighting ramp
                    [2.0, 9.0]])   # log10 gamma
@@ -63,16 +64,21 @@ class SwarmObjective:
         c1 = particles[:, 0]
         c2 = c1 + particles[:, 1]
         gamma = 10.0 ** particles[:, 2]
-        V = robust_weights(self.standardised, c1, c2)
-        G = (V @ self.Z).reshape(-1, self.p, self.p) + np.eye(self.p)[None] / gamma[:, None, None]
-        rhs = V @ self.Zy
+        G = np.zeros((len(particles), self.p * self.p))
+        rhs = np.zeros((len(particles), self.p))
+        for start in range(0, len(self.standardised), CHUNK_ROWS):  # weights in cache, not in memory
+            rows = slice(start, start + CHUNK_ROWS)
+            V = robust_weights(self.standardised[rows], c1, c2)
+            G += V @ self.Z[rows]
+            rhs += V @ self.Zy[rows]
+        G = G.reshape(-1, self.p, self.p) + np.eye(self.p)[None] / gamma[:, None, None]
         return np.linalg.solve(G, rhs[:, :, None])[:, :, 0]
 
     def __call__(self, particles: np.ndarray) -> np.ndarray:
         W = self.solve(particles)
         err2 = (self.yv[None, :] - W @ self.Xv.T) ** 2
         keep = max(1, int(0.98 * err2.shape[1]))
-        return np.mean(np.sort(err2, axis=1)[:, :keep], axis=1)
+        return np.mean(np.partition(err2, keep - 1, axis=1)[:, :keep], axis=1)
 
 
 def adaptive_pso(objective, bounds: np.ndarray, particles: int = 16, iterations: int = 12,

@@ -171,8 +171,16 @@ class OutputError(Estimator):
         self.name = f"{start.name}+oe"
 
     def fit(self, structure: Structure, dataset: Dataset) -> Estimate:
+        """Refine the start's fit; with effects, the start's fit of the bare model (effects
+        neutral) is a further starting point: an effect's regression column can make the
+        regression start course-unstable (KVLCC2 with cubic_yaw: T < 0)."""
         first = self.start.fit(structure, dataset)
-        return self.refine(structure, dataset, first)
+        if not structure.effects:
+            return self.refine(structure, dataset, first)
+        bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
+        for effect in structure.effects:
+            bare.update(effect.neutral())
+        return self.refine(structure, dataset, first, starts=(bare,))
 
     def intervals(self, dataset: Dataset) -> tuple:
         """Shooting intervals: each restarts the free run from its own estimated state."""

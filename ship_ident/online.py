@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .change import ChangeDetector
 from .jsonio import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import DEFAULT_METHOD, MethodError, make_estimator
@@ -59,6 +60,7 @@ CONDITION_LEVELS = {
     "refit_overran": WARN,
     "rejected_samples": WARN,
     "clock_jump": WARN,
+    "vessel_changed": WARN,
     "window_truncated": WARN,
     "heading_in_degrees": WARN,
     "yaw_rate_sign": WARN,
@@ -124,6 +126,9 @@ class OnlineConfig:
                                           # forward, a step beyond max(this, refit_period) is one
     max_window_samples: int = 20000       # hard bound on stored samples per input
     prediction_horizon: float = 10.0      # s of free run behind the predicted yaw rate
+    change_ratio: float = 9.0             # newest free-run error / usual level (mean squares) that
+                                          # restarts the window (the vessel changed); 0: never
+    change_test_length: float = 30.0      # s of newest data the change test runs the model over
 
     def __post_init__(self):
         effects = self.effects
@@ -134,7 +139,8 @@ class OnlineConfig:
     def validate(self) -> "OnlineConfig":
         """Raise ConfigError naming the first bad value; return self when all are usable."""
         positive = ("sample_time", "window_length", "refit_period", "stale_timeout",
-                    "gap_threshold", "clock_jump_threshold", "prediction_horizon")
+                    "gap_threshold", "clock_jump_threshold", "prediction_horizon",
+                    "change_test_length")
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -152,6 +158,9 @@ class OnlineConfig:
                               f"{self.sample_time} s")
         if not 0 <= self.min_rudder_std < 0.5:
             raise ConfigError(f"min_rudder_std must be in [0, 0.5) rad, got {self.min_rudder_std}")
+        if not (self.change_ratio == 0 or 1 < self.change_ratio < math.inf):
+            raise ConfigError(f"change_ratio must be 0 (no change test) or a finite number > 1, "
+                              f"got {self.change_ratio!r}")
         if not 0 <= self.min_fit_correlation <= 1:
             raise ConfigError(f"min_fit_correlation must be in [0, 1], got {self.min_fit_correlation}")
         needed = int(math.ceil(self.window_length / self.sample_time))
@@ -260,6 +269,9 @@ class OnlineIdentifier:
         self._last_jump = 0.0
         self._last_good = None      # Estimate of the current structure
         self._last_good_window = (math.nan, math.nan)
+        self._change = ChangeDetector(config.change_ratio, config.change_test_length)
+        self._window_floor = -math.inf  # s: where the vessel last changed; older data are dropped
+        self._change_note = None    # sentence reported until the first estimate after a change
 
     # --- configuration ---------------------------------------------------
     @property
@@ -272,6 +284,8 @@ class OnlineIdentifier:
         with self._lock:
             if (config.model, config.effects) != (self._config.model, self._config.effects):
                 self._last_good = None
+                self._change.forget()
+            self._change.ratio, self._change.length = config.change_ratio, config.change_test_length
             if config.refit_period != self._config.refit_period and self._next_due is not None:
                 self._next_due = min(self._next_due, self._latest_time + config.refit_period)
             self._config = config
@@ -317,6 +331,8 @@ class OnlineIdentifier:
             for role in ROLES:
                 self._window[role].clear()
                 self._newest[role] = -math.inf
+            self._window_floor = -math.inf
+            self._change.forget()   # its references belong to the old time line
         elif not now > self._latest_time + max(config.clock_jump_threshold, config.refit_period) \
                 or self._latest_time == -math.inf:
             self._latest_time = max(self._latest_time, now)
@@ -356,7 +372,7 @@ class OnlineIdentifier:
             self._observe_clock(now)   # after: a clock jump restarts the schedule from now
             config = self._config
             for role in ROLES:
-                self._prune(self._window[role], now - config.window_length)
+                self._prune(self._window[role], max(now - config.window_length, self._window_floor))
             series = {role: _as_array(self._window[role]) for role in ROLES}
             full = [role for role in ROLES if len(self._window[role]) == config.max_window_samples]
             newest = dict(self._newest)
@@ -365,7 +381,10 @@ class OnlineIdentifier:
             self._reported = counts
             last_good, last_window = self._last_good, self._last_good_window
             last_jump = self._last_jump
+            change_note = self._change_note
         conditions = self._input_conditions(config, series, newest, now, fresh, last_jump)
+        if change_note:
+            conditions["vessel_changed"] = change_note
         conditions.update(_truncation(config, series, full, now))
         conditions.update(_heading_plausibility(series))
         record = RefitRecord(time=now, conditions=conditions, counts=counts)
@@ -424,6 +443,11 @@ class OnlineIdentifier:
             longest = max(b - a for a, b in dataset.gaps)
             record.conditions["gap_in_window"] = (f"{len(dataset.gaps)} gap(s) in the window, longest "
                                                   f"{longest:.1f} s; fitting the segments apart")
+        structure = config.structure()
+        if last_good is not None and self._change_note is None:
+            dataset = self._test_for_change(config, structure, dataset, record)
+            if dataset is None:
+                return
         record.conditions.update(_rudder_saturation(dataset.rudder))
         rudder_std = float(np.std(dataset.rudder))
         if rudder_std < config.min_rudder_std:
@@ -431,7 +455,6 @@ class OnlineIdentifier:
                 f"rudder std {math.degrees(rudder_std):.2f} deg < "
                 f"{math.degrees(config.min_rudder_std):.2f} deg; keeping the last good estimate")
             return
-        structure = config.structure()
         estimator = make_estimator(config.method)
         try:
             estimate = None
@@ -466,9 +489,36 @@ class OnlineIdentifier:
         record.new_estimate = True
         record.predicted_yaw_rate, record.measured_yaw_rate = self._predict(
             config, structure, estimate.parameters, dataset)
+        if dataset.duration >= config.window_length - 1.5 * config.sample_time:
+            self._change.calibrate(structure, estimate, dataset)  # a full window's model
         with self._lock:
             if (config.model, config.effects) == (self._config.model, self._config.effects):
                 self._last_good, self._last_good_window = estimate, record.window
+            self._change_note = None
+
+    def _test_for_change(self, config, structure, dataset, record):
+        """Run the change test; on a change, restart the window where it happened and return the
+        data after it (None when they are too few for a fit yet)."""
+        try:
+            ratio, changed_at = self._change.test(structure, dataset)
+        except (DataError, StructureError, ValueError):
+            return dataset
+        if changed_at is None:
+            return dataset
+        note = (f"the newest model fitted before the last {config.change_test_length:g} s mispredicts them "
+                f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
+                f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
+                f"the window restarts at {changed_at:.1f} s, where the error stepped up (new estimate "
+                f"from {config.min_window_length:g} s of new data)")
+        with self._lock:
+            self._window_floor, self._change_note = changed_at, note
+        record.conditions["vessel_changed"] = note
+        dataset = dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
+        record.window = (float(dataset.time[0]), float(dataset.time[-1])) if dataset.n_samples \
+            else record.window
+        if dataset.duration < config.min_window_length - 0.5 * config.sample_time:
+            return None
+        return dataset
 
     @staticmethod
     def _predict(config, structure, params, dataset) -> tuple[float, float]:

@@ -6,6 +6,7 @@ import re
 import numpy as np
 import pytest
 
+from ship_ident.change import variance_change_point
 from ship_ident.io import Sample
 from ship_ident.online import ConfigError, EstimateLog, OnlineConfig, OnlineIdentifier, run_schedule
 from ship_ident.simulator import Noise, simulate
@@ -140,10 +141,59 @@ def test_replay_schedule_recovers_truth(sim):
     (dict(max_window_samples=10), "max_window_samples"),
     (dict(max_window_samples=50_000_000), "GB"),  # a window that would not fit in memory
     (dict(effects="speed_dependence"), "speed_topic"),
+    (dict(change_ratio=0.5), "change_ratio"),
+    (dict(change_test_length=0.0), "change_test_length"),
 ])
 def test_config_errors_say_what_is_wrong(values, message):
     with pytest.raises(ConfigError, match=message):
         OnlineConfig(**values).validate()
+
+
+def k_trace(records):
+    """(times, K in force) over the records that carry an estimate."""
+    pairs = [(r.time, r.estimate["parameters"]["K"]) for r in records if r.estimate]
+    return np.array([t for t, _ in pairs]), np.array([k for _, k in pairs])
+
+
+def settled_after(times, ks, truth, since):
+    """First refit time after ``since`` from which K stays within 5 % of ``truth``."""
+    outside = times[(times > since) & (np.abs(ks / truth - 1) > 0.05)]
+    return outside.max() + 5.0 if len(outside) else since
+
+
+def test_a_changed_vessel_restarts_the_window():
+    """K -30 % and T1 +30 % at 400 s (loaded mid-trip): the change test finds it, the window
+    restarts within a few seconds of it, and K is back within 5 % long before the 180 s window
+    would have flushed the old data; with the test off it takes about a window."""
+    change = 400.0
+    sim = simulate("zigzag20", duration=700.0, seed=31, change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}))
+    k_new = sim.info["truth_after"]["K"]
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig()), stream(sim.dataset)))
+    alarms = [r for r in records if "vessel_changed" in r.conditions]
+    assert alarms and change < alarms[0].time <= change + 30.0
+    restart = re.search(r"restarts at ([0-9.]+) s", alarms[0].conditions["vessel_changed"])
+    assert abs(float(restart.group(1)) - change) < 2.0
+    assert "diagnose" in alarms[0].conditions["vessel_changed"] and alarms[0].status == "WARN"
+    assert not [r for r in records if r.time < change and "vessel_changed" in r.conditions]
+    assert settled_after(*k_trace(records), k_new, change) - change <= 80.0
+    assert all(r.window[0] >= float(restart.group(1)) - 0.1 for r in records if r.new_estimate and r.time > change + 60)
+
+    off = list(run_schedule(OnlineIdentifier(OnlineConfig(change_ratio=0.0)), stream(sim.dataset)))
+    assert not [r for r in off if "vessel_changed" in r.conditions]
+    assert settled_after(*k_trace(off), k_new, change) - change >= 150.0
+
+
+def test_variance_step_is_located_to_a_few_samples():
+    rng = np.random.default_rng(4)
+    errors = np.concatenate([rng.normal(0, 1.0, 370), rng.normal(0, 4.0, 230)])  # steps at 370
+    assert abs(variance_change_point(errors ** 2) - 370) <= 5
+
+
+def test_no_change_alarm_on_a_steady_vessel():
+    sim = simulate("mixed", duration=900.0, seed=5)
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig()), stream(sim.dataset)))
+    assert sum(r.new_estimate for r in records) > 150
+    assert not [r.conditions["vessel_changed"] for r in records if "vessel_changed" in r.conditions]
 
 
 def test_effects_accept_comma_text():
@@ -279,3 +329,14 @@ def test_estimate_log_in_an_unwritable_place_is_a_config_error(tmp_path):
     (tmp_path / "file").write_text("")
     with pytest.raises(ConfigError, match="log_directory"):
         EstimateLog(tmp_path / "file" / "logs")
+
+
+def test_change_test_survives_a_clock_jump_back():
+    """A clock reset (bag looped, simulator restarted) keeps detecting changes on the new time line."""
+    sim = simulate("zigzag20", duration=700.0, seed=31, change=(400.0, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}))
+    ident = OnlineIdentifier(OnlineConfig())
+    list(run_schedule(ident, stream(sim.dataset.slice(0, 3000), start=1000.0)))  # 1000 .. 1300 s
+    records = list(run_schedule(ident, stream(sim.dataset)))                      # back to 0 s
+    assert ident.counts["clock_jumps"] == 1
+    alarms = [r.time for r in records if "vessel_changed" in r.conditions]
+    assert alarms and 400.0 < alarms[0] <= 430.0

@@ -49,6 +49,10 @@ def add_parser(subparsers) -> None:
                         help="s of bag time between refits (default %(default)s)")
     parser.add_argument("--min-window-length", type=float, default=DEFAULTS.min_window_length,
                         metavar="S", help="s of data before the first fit (default %(default)s)")
+    parser.add_argument("--change-ratio", type=float, default=DEFAULTS.change_ratio, metavar="R",
+                        help="restart the window where the vessel changed, when the newest 30 s are "
+                             "mispredicted R times worse (mean squares) than usual; 0: never "
+                             "(default %(default)s)")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON object per refit on stdout, one per line (JSON lines)")
     parser.add_argument("--out", metavar="OUT.mcap",
@@ -63,6 +67,7 @@ def config_from_args(args, topics: Topics, has_speed: bool) -> OnlineConfig:
         speed_topic=topics.speed if has_speed else "", imu_topic=topics.imu,
         sample_time=args.sample_time, window_length=args.window_length,
         refit_period=args.refit_period, min_window_length=min(args.min_window_length, args.window_length),
+        change_ratio=args.change_ratio,
         model=args.model, effects=args.effects, method=args.method).validate()
 
 

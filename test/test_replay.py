@@ -85,13 +85,15 @@ def estimates_in(path) -> list[dict]:
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_interrupted_replay_leaves_a_readable_mcap_with_every_estimate(tmp_path, signum):
     out = tmp_path / "partial.mcap"
+    # unbuffered: readline takes exactly one line from the pipe, so communicate() gets the rest
+    # (a buffered reader may hold the next lines where communicate, reading the pipe, misses them)
     process = subprocess.Popen([sys.executable, "-m", "ship_ident.cli", "replay", str(DEMO_BAG), "--json",
                                 "--out", str(out), "--refit-period", "1.0"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
     try:
         printed = [json.loads(process.stdout.readline()) for _ in range(20)]
         process.send_signal(signum)
-        rest, err = process.communicate(timeout=30)
+        rest, err = (text.decode() for text in process.communicate(timeout=30))
     finally:
         if process.poll() is None:
             process.kill()

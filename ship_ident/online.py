@@ -438,16 +438,16 @@ class OnlineIdentifier:
         except DataError as exc:
             record.conditions["refit_failed"] = f"window unusable: {exc}"
             return
-        record.window = (float(dataset.time[0]), float(dataset.time[-1]))
-        if dataset.gaps:
-            longest = max(b - a for a, b in dataset.gaps)
-            record.conditions["gap_in_window"] = (f"{len(dataset.gaps)} gap(s) in the window, longest "
-                                                  f"{longest:.1f} s; fitting the segments apart")
         structure = config.structure()
         if last_good is not None and self._change_note is None:
             dataset = self._test_for_change(config, structure, dataset, record)
             if dataset is None:
                 return
+        record.window = (float(dataset.time[0]), float(dataset.time[-1]))
+        if dataset.gaps:
+            longest = max(b - a for a, b in dataset.gaps)
+            record.conditions["gap_in_window"] = (f"{len(dataset.gaps)} gap(s) in the window, longest "
+                                                  f"{longest:.1f} s; fitting the segments apart")
         record.conditions.update(_rudder_saturation(dataset.rudder))
         rudder_std = float(np.std(dataset.rudder))
         if rudder_std < config.min_rudder_std:
@@ -514,8 +514,6 @@ class OnlineIdentifier:
             self._window_floor, self._change_note = changed_at, note
         record.conditions["vessel_changed"] = note
         dataset = dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
-        record.window = (float(dataset.time[0]), float(dataset.time[-1])) if dataset.n_samples \
-            else record.window
         if dataset.duration < config.min_window_length - 0.5 * config.sample_time:
             return None
         return dataset

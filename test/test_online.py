@@ -149,6 +149,9 @@ def test_config_errors_say_what_is_wrong(values, message):
         OnlineConfig(**values).validate()
 
 
+LOADED = {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}  # seed001 vessel after loading: K -30 %, T1 +30 %
+
+
 def k_trace(records):
     """(times, K in force) over the records that carry an estimate."""
     pairs = [(r.time, r.estimate["parameters"]["K"]) for r in records if r.estimate]
@@ -166,7 +169,7 @@ def test_a_changed_vessel_restarts_the_window():
     restarts within a few seconds of it, and K is back within 5 % long before the 180 s window
     would have flushed the old data; with the test off it takes about a window."""
     change = 400.0
-    sim = simulate("zigzag20", duration=700.0, seed=31, change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}))
+    sim = simulate("zigzag20", duration=700.0, seed=31, change=(change, LOADED))
     k_new = sim.info["truth_after"]["K"]
     records = list(run_schedule(OnlineIdentifier(OnlineConfig()), stream(sim.dataset)))
     alarms = [r for r in records if "vessel_changed" in r.conditions]
@@ -333,7 +336,7 @@ def test_estimate_log_in_an_unwritable_place_is_a_config_error(tmp_path):
 
 def test_change_test_survives_a_clock_jump_back():
     """A clock reset (bag looped, simulator restarted) keeps detecting changes on the new time line."""
-    sim = simulate("zigzag20", duration=700.0, seed=31, change=(400.0, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}))
+    sim = simulate("zigzag20", duration=700.0, seed=31, change=(400.0, LOADED))
     ident = OnlineIdentifier(OnlineConfig())
     list(run_schedule(ident, stream(sim.dataset.slice(0, 3000), start=1000.0)))  # 1000 .. 1300 s
     records = list(run_schedule(ident, stream(sim.dataset)))                      # back to 0 s

@@ -21,8 +21,16 @@ COMMANDS = ("simulate", "identify", "compare", "replay", "play", "diagnose", "be
 EXIT_USAGE = 2
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse whose usage errors (unknown option, a value of the wrong type or choice) are one
+    line, ``prog: error: message (see prog --help)``, exit code 2; subcommand parsers inherit it."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="ship-ident",
         description="Identify USV steering models (Nomoto) from bags and CSV files, replay bags, "
                     "diagnose missing physics.")

@@ -150,6 +150,10 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, clean_files, ship_ident_cl
         (("identify", straight), "too little excitation"),
         (("compare", not_a_model, paths["csv"]), "not a model file"),
         (("simulate", "--maneuver", "turning", "--out", paths["csv"]), "exists already"),
+        (("identify", paths["csv"], "--sample-time", "abc"), "invalid float value"),  # argparse's own
+        (("diagnose", paths["csv"], "--model", "nomoto9"), "invalid choice"),
+        (("replay", paths["csv"], "--no-such-option"), "unrecognized arguments"),
+        (("frobnicate",), "invalid choice"),
     ]
     for args, words in cases:
         assert_one_line_error(ship_ident_cli(*args), words)

@@ -16,6 +16,8 @@ import sys
 from dataclasses import dataclass
 from typing import Callable
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class Benchmark:
@@ -24,6 +26,7 @@ class Benchmark:
     run: Callable[..., dict]
     render: Callable[[dict], str]
     plots: bool = False
+    randomised: bool = False
 
 
 _REGISTRY: dict[str, Benchmark] = {}
@@ -31,8 +34,8 @@ HELPERS = {"crb", "common"}  # modules here that are no benchmark
 
 
 def register(name: str, description: str, run: Callable[..., dict], render: Callable[[dict], str],
-             plots: bool = False) -> None:
-    _REGISTRY[name] = Benchmark(name, description, run, render, plots)
+             plots: bool = False, randomised: bool = False) -> None:
+    _REGISTRY[name] = Benchmark(name, description, run, render, plots, randomised)
 
 
 def benchmarks() -> dict[str, Benchmark]:
@@ -41,6 +44,11 @@ def benchmarks() -> dict[str, Benchmark]:
         if module.name not in HELPERS:
             importlib.import_module(f"{__name__}.{module.name}")
     return dict(sorted(_REGISTRY.items()))
+
+
+def fresh_seed() -> int:
+    """A seed drawn from the operating system's entropy (printed by the caller for replay)."""
+    return int(np.random.SeedSequence().entropy % 2**32)
 
 
 def progress(message: str) -> None:

@@ -17,17 +17,32 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--quick", action="store_true", help="tiny sizes (smoke test, minutes -> seconds)")
     parser.add_argument("--plot-dir", metavar="DIR",
                         help="write the benchmark's figures (PNG) here, for those that draw any")
+    parser.add_argument("--seed", type=int, metavar="N",
+                        help="randomised benchmarks: replay this seed (default: a fresh one, printed)")
+    parser.add_argument("--count", type=int, metavar="N",
+                        help="randomised benchmarks: how many vessels or cases to draw")
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..bench import benchmarks
+    from ..bench import benchmarks, fresh_seed, progress
+    from ..errors import CommandError
 
     benchmark = benchmarks()[args.name]
+    options = {}
     if benchmark.plots and args.plot_dir:
-        result = benchmark.run(args.quick, plot_dir=args.plot_dir)
-    else:
-        result = benchmark.run(args.quick)
+        options["plot_dir"] = args.plot_dir
+    if benchmark.randomised:
+        if args.count is not None and args.count < 1:
+            raise CommandError(f"--count must be >= 1, got {args.count}")
+        options["seed"] = fresh_seed() if args.seed is None else args.seed
+        options["count"] = args.count
+        progress(f"{benchmark.name}: seed {options['seed']} (replay with --seed {options['seed']})")
+    elif args.seed is not None or args.count is not None:
+        raise CommandError(f"{benchmark.name} is not randomised: --seed and --count do not apply")
+    result = benchmark.run(args.quick, **options)
     result = {"benchmark": benchmark.name, "quick": bool(args.quick), **result}
+    if benchmark.randomised:
+        result["seed"] = options["seed"]
     print(json.dumps(result, allow_nan=True) if args.json else benchmark.render(result))
     return 0

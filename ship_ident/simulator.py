@@ -51,6 +51,48 @@ VESSELS = {
 }
 
 
+# Ranges of the randomised vessels (log-uniform unless said): quick USVs to slow ships.
+VESSEL_KINDS = {
+    # K (1/s), T1 (s), T2 / T1, T3 (s), rudder rate (deg/s), rudder limit (deg), speed (m/s)
+    "usv": dict(K=(0.15, 0.8), T1=(1.0, 12.0), T2_share=(0.03, 0.3), T3=(0.0, 2.5),
+                rudder_rate=(10.0, 30.0), rudder_limit=(30.0, 35.0), speed=(1.5, 6.0)),
+    "ship": dict(K=(0.03, 0.15), T1=(15.0, 80.0), T2_share=(0.03, 0.2), T3=(0.0, 10.0),
+                 rudder_rate=(2.3, 5.0), rudder_limit=(35.0, 35.0), speed=(4.0, 8.0)),
+}
+
+
+def random_vessel(rng: np.random.Generator, kind: str = "any") -> "Vessel":
+    """A vessel drawn at random over wide ranges (``VESSEL_KINDS``; ``any``: a USV two times in
+    three, else a slow ship). T2 is a share of T1 and capped at 1.5 s for USVs; the cubic
+    damping alpha is drawn so that alpha r^2 lies in [-0.2, 0.5] at the turn rate of 20 deg of
+    rudder (K * 0.35 rad), the rudder offset in +-1.5 deg; all other effect parameters take the
+    presets' values. The name carries the drawn values, so a failing case can be read off."""
+    if kind == "any":
+        kind = "usv" if rng.uniform() < 2 / 3 else "ship"
+    if kind not in VESSEL_KINDS:
+        raise ValueError(f"unknown vessel kind {kind!r}; choose from any, {', '.join(VESSEL_KINDS)}")
+    ranges = VESSEL_KINDS[kind]
+
+    def log_uniform(lo, hi):
+        return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+
+    k_gain, t1 = log_uniform(*ranges["K"]), log_uniform(*ranges["T1"])
+    t2 = t1 * rng.uniform(*ranges["T2_share"])
+    t2 = min(t2, 1.5) if kind == "usv" else t2
+    t3 = float(rng.uniform(*ranges["T3"]))
+    turn_rate = k_gain * np.radians(20.0)
+    parameters = dict(_EFFECT_TRUTH, K=k_gain, T1=t1, T2=t2, T3=t3, T=t1 + t2 - t3,
+                      alpha=float(rng.uniform(-0.2, 0.5)) / turn_rate ** 2,
+                      delta_r=float(np.radians(rng.uniform(-1.5, 1.5))))
+    name = f"{kind}(K={k_gain:.3g},T1={t1:.3g},T2={t2:.3g},T3={t3:.3g})"
+    return Vessel(name, f"random {kind}: " + ", ".join(f"{k}={parameters[k]:.4g}" for k in
+                                                       ("K", "T1", "T2", "T3", "alpha", "delta_r")),
+                  parameters, seed_effects=("rudder_offset", "cubic_yaw"),
+                  speed=float(rng.uniform(*ranges["speed"])),
+                  rudder_rate=float(np.radians(rng.uniform(*ranges["rudder_rate"]))),
+                  rudder_limit=float(np.radians(rng.uniform(*ranges["rudder_limit"]))))
+
+
 @dataclass(frozen=True)
 class Noise:
     """Sensor noise standard deviations (SI): the realistic levels of the identification benchmarks."""

@@ -158,3 +158,68 @@ def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_tim
         segments=tuple(segments), gaps=tuple(gaps),
         meta=dict(meta or {}, sample_time=sample_time),
     )
+
+
+def resampled(dataset: Dataset, sample_time: float) -> Dataset:
+    """The dataset on the grid step ``sample_time`` (s), each segment interpolated on its own
+    (nothing bridges a gap); unchanged when its step already is ``sample_time``."""
+    if np.isclose(dataset.sample_time, sample_time, rtol=1e-3):
+        return dataset
+    parts = []
+    for part in dataset.segment_datasets():
+        signals = {name: (part.time, getattr(part, name)) for name in ("rudder", "heading", "yaw_rate", "speed")
+                   if getattr(part, name) is not None}
+        if part.duration >= 2 * sample_time:
+            parts.append(resample_series(signals, sample_time, unwrap_heading=False))
+    if not parts:
+        raise DataError(f"{dataset.meta.get('source', 'a recording')} has no stretch of "
+                        f"{2 * sample_time:g} s to resample onto a {sample_time:g} s step")
+    return _concatenate(parts, [p.time for p in parts], dataset.gaps,
+                        dict(dataset.meta, sample_time=sample_time))
+
+
+def join_recordings(recordings: list[Dataset], names: list[str] | None = None,
+                    sample_time: float | None = None) -> Dataset:
+    """Several recordings as one Dataset, each its own segment(s), never bridged.
+
+    All are brought onto one grid step ``sample_time`` (s; default the first recording's) and laid
+    one after another in time, two steps apart. ``meta["recordings"]`` lists each recording as
+    ``{"name", "start", "stop"}`` (sample indices, stop exclusive); the names default to each
+    recording's ``meta["source"]``. A single recording gets its one entry too.
+    """
+    if not recordings:
+        raise DataError("no recordings given; name at least one bag or CSV file")
+    names = list(names) if names is not None else [
+        str(r.meta.get("source", f"recording {i + 1}")) for i, r in enumerate(recordings)]
+    if len(names) != len(recordings):
+        raise ValueError(f"{len(names)} names for {len(recordings)} recordings")
+    h = recordings[0].sample_time if sample_time is None else float(sample_time)
+    recordings = [resampled(r, h) for r in recordings]
+    times, gaps, entries, start, t0 = [], [], [], 0, float(recordings[0].time[0])
+    for name, r in zip(names, recordings):
+        shift = t0 - r.time[0]
+        if times:
+            gaps.append((float(times[-1][-1]), t0))
+        times.append(r.time + shift)
+        gaps += [(g0 + shift, g1 + shift) for g0, g1 in r.gaps]
+        entries.append({"name": name, "start": start, "stop": start + r.n_samples})
+        start += r.n_samples
+        t0 = float(r.time[-1] + shift + 2 * h)
+    return _concatenate(recordings, times, gaps,
+                        dict(recordings[0].meta, sample_time=h, recordings=entries))
+
+
+def _concatenate(parts: list[Dataset], times: list[np.ndarray], gaps, meta: dict) -> Dataset:
+    """``parts`` one after another on the given ``times`` (s), their segments kept apart; the speed
+    only when every part has one."""
+    segments, start = [], 0
+    for part in parts:
+        segments += [(a + start, b + start) for a, b in part.segments]
+        start += part.n_samples
+
+    def join(name: str) -> np.ndarray:
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    speed = None if any(p.speed is None for p in parts) else join("speed")
+    return Dataset(np.concatenate(times), join("rudder"), join("heading"), join("yaw_rate"), speed,
+                   tuple(segments), tuple(sorted(gaps)), meta)

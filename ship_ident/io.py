@@ -4,7 +4,10 @@ Reading accepts a rosbag2 directory (MCAP storage; ``metadata.yaml`` as
 ``ros2 bag record -s mcap`` or rosbags writes it), a directory holding
 ``.mcap`` files but no usable ``metadata.yaml`` (an interrupted recording,
 a copied folder), a bare ``.mcap`` file, or a CSV file
-``t,rudder,heading,yaw_rate[,speed]`` in SI units with a header line.
+``t,rudder,heading,yaw_rate[,speed]`` in SI units with a header line. CSV
+columns are found by name: the canonical names, common synonyms
+(``CSV_SYNONYMS``: e.g. ``surge_speed`` or ``u`` for the speed, ``delta`` for the
+rudder), or the user's own mapping (``Topics.csv_columns``, ``--columns``).
 
 Inputs are ``std_msgs/msg/Float64`` topics stamped with the bag's log time,
 or a ``sensor_msgs/msg/Imu`` topic (ROS ENU convention) for heading and yaw
@@ -34,6 +37,15 @@ from .dataset import DataError, Dataset, resample_series
 
 ROLES = ("rudder", "heading", "yaw_rate", "speed")
 CSV_COLUMNS = ("t", "rudder", "heading", "yaw_rate", "speed")  # speed optional
+# Column names read as each role without --columns (matched case-insensitively, SI units only),
+# the canonical name first; a public simulator's CSV names the speed surge_speed.
+CSV_SYNONYMS = {
+    "t": ("t", "time", "t_s", "time_s", "timestamp"),
+    "rudder": ("rudder", "delta", "rudder_angle", "rudder_rad", "delta_rad"),
+    "heading": ("heading", "psi", "yaw", "heading_rad", "psi_rad"),
+    "yaw_rate": ("yaw_rate", "r", "yaw_rate_rad_s", "r_rad_s"),
+    "speed": ("speed", "surge_speed", "u", "speed_mps", "u_mps"),
+}
 FLOAT64 = "std_msgs/msg/Float64"
 IMU = "sensor_msgs/msg/Imu"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -47,13 +59,15 @@ class UnreadableBag(DataError):
 
 @dataclass(frozen=True)
 class Topics:
-    """Input topic names; when ``imu`` is set, heading and yaw rate come from that Imu topic."""
+    """Input names: bag topics (when ``imu`` is set, heading and yaw rate come from that Imu topic)
+    and, for CSV files, the user's (role, column) pairs ``csv_columns`` (see ``parse_columns``)."""
 
     rudder: str = "/usv/rudder"
     heading: str = "/usv/heading"
     yaw_rate: str = "/usv/yaw_rate"
     speed: str = "/usv/speed"
     imu: str = ""
+    csv_columns: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -85,7 +99,7 @@ def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
     elif path.suffix.lower() == ".mcap" or _starts_with_mcap_magic(path):
         samples = _read_bag([path], topics)
     elif path.suffix.lower() in (".csv", ".txt"):
-        samples = _read_csv(path)
+        samples = _read_csv(path, dict(topics.csv_columns))
     else:
         raise DataError(f"{path} is neither a bag (rosbag2 directory or .mcap file) nor a CSV file "
                         "(.csv); convert it or rename it")
@@ -95,14 +109,18 @@ def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
 
 
 def load_dataset(path, topics: Topics = Topics(), sample_time: float = 0.1) -> Dataset:
-    """A bag or CSV file resampled onto a uniform grid (gaps split segments, heading unwrapped)."""
+    """A bag or CSV file resampled onto a uniform grid (gaps split segments, heading unwrapped);
+    for a CSV file ``meta["columns"]`` maps each role to the column read."""
     samples = read_samples(path, topics)
     series = {}
     for role in ROLES:
         picked = [(s.time, s.value) for s in samples if s.role == role]
         if picked:
             series[role] = tuple(np.array(column) for column in zip(*picked))
-    return resample_series(series, sample_time, meta={"source": str(path)})
+    meta = {"source": str(path)}
+    if Path(path).suffix.lower() in (".csv", ".txt"):
+        meta["columns"] = csv_column_map(path, dict(topics.csv_columns))
+    return resample_series(series, sample_time, meta=meta)
 
 
 def _starts_with_mcap_magic(path: Path) -> bool:
@@ -191,28 +209,97 @@ def wrap_angle(angle: float) -> float:
     return math.pi if wrapped == -math.pi else wrapped
 
 
-def _read_csv(path: Path) -> list[Sample]:
+def parse_columns(text: str) -> tuple[tuple[str, str], ...]:
+    """``speed=surge_speed,rudder=delta`` as ((role, column), ...); an unknown role, a pair without
+    ``=`` or a role named twice raises DataError."""
+    pairs = []
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        role, sep, column = (x.strip() for x in item.partition("="))
+        if not sep or not role or not column:
+            raise DataError(f"--columns item {item!r} is not ROLE=COLUMN; e.g. --columns speed=surge_speed,rudder=delta")
+        if role not in CSV_SYNONYMS:
+            raise DataError(f"--columns: unknown role {role!r}; roles are {', '.join(CSV_SYNONYMS)}")
+        if role in dict(pairs):
+            raise DataError(f"--columns names the role {role!r} twice; give each role once")
+        pairs.append((role, column))
+    return tuple(pairs)
+
+
+def resolve_columns(header: list[str], chosen: dict[str, str], synonyms: dict[str, tuple[str, ...]],
+                    required, source) -> dict[str, str]:
+    """Which header column each role of ``synonyms`` is read from: the user's ``chosen`` column
+    (which must exist), else the first synonym present (case-insensitive). A ``required`` role
+    without a column, or one column for two roles, raises DataError naming the columns found."""
+    by_name = {h.lower(): h for h in header}
+    found = ", ".join(header) or "none"
+    mapping = {}
+    for role, column in chosen.items():
+        if column not in header:
+            raise DataError(f"{source} has no column {column!r} (--columns {role}={column}); its columns: {found}")
+        mapping[role] = column
+    for role, names in synonyms.items():
+        if role not in mapping:
+            match = next((by_name[n] for n in names if n in by_name and by_name[n] not in mapping.values()), None)
+            if match is not None:
+                mapping[role] = match
+    missing = [role for role in required if role not in mapping]
+    for role in missing:
+        taken = next((by_name[n] for n in synonyms[role] if by_name.get(n) in mapping.values()), None)
+        if taken is not None:
+            other = next(r for r, c in mapping.items() if c == taken)
+            raise DataError(f"{source}: column {taken!r} is read as {other} (--columns), so {role} has "
+                            f"none; name its column with --columns {role}=NAME")
+    if missing:
+        raise DataError(f"{source} has no column for {', '.join(missing)}; its columns: {found}; "
+                        f"name them with --columns, e.g. --columns {missing[0]}=NAME (SI units)")
+    twice = sorted({c for c in mapping.values() if list(mapping.values()).count(c) > 1})
+    if twice:
+        raise DataError(f"{source}: column {twice[0]!r} is named for two roles; give each role its own column")
+    return mapping
+
+
+def _csv_header(path: Path) -> list[str]:
     with path.open(newline="") as f:
-        rows = csv.reader(f)
-        header = [h.strip() for h in next(rows, [])]
-        missing = [c for c in CSV_COLUMNS[:4] if c not in header]
-        if missing:
-            raise DataError(f"{path} lacks the column(s) {', '.join(missing)}; the CSV needs the "
-                            "header line t,rudder,heading,yaw_rate[,speed] (SI units)")
-        columns = {c: header.index(c) for c in CSV_COLUMNS if c in header}
-        samples = []
-        for line, row in enumerate(rows, start=2):
+        return [h.strip() for h in next(csv.reader(f), [])]
+
+
+def csv_column_map(path, chosen: dict[str, str] | None = None) -> dict[str, str]:
+    """Role -> CSV column read for the Nomoto roles of ``path`` (see ``resolve_columns``)."""
+    path = Path(path)
+    return resolve_columns(_csv_header(path), chosen or {}, CSV_SYNONYMS, CSV_COLUMNS[:4], path)
+
+
+def is_canonical(mapping: dict[str, str]) -> bool:
+    """True when every role is read from the column of its own name."""
+    return all(role == column for role, column in mapping.items())
+
+
+def read_csv_columns(path: Path, mapping: dict[str, str]) -> dict[str, np.ndarray]:
+    """The mapped columns of a CSV file as float arrays {role: values}; a row that is not numbers
+    raises DataError naming its line."""
+    header = _csv_header(path)
+    index = {role: header.index(column) for role, column in mapping.items()}
+    rows = []
+    with path.open(newline="") as f:
+        lines = csv.reader(f)
+        next(lines, None)
+        for line, row in enumerate(lines, start=2):
             if not row:
                 continue
             try:
-                values = {c: float(row[i]) for c, i in columns.items()}
+                rows.append([float(row[i]) for i in index.values()])
             except (ValueError, IndexError):
-                raise DataError(f"{path} line {line} is not {len(columns)} numbers: {','.join(row)!r}; "
+                raise DataError(f"{path} line {line} is not {len(header)} numbers: {','.join(row)!r}; "
                                 "fix or delete that line") from None
-            samples.extend(Sample(values["t"], role, values[role]) for role in ROLES if role in values)
-    if not samples:
+    if not rows:
         raise DataError(f"{path} holds a header but no data rows; export the data again")
-    return samples
+    return dict(zip(index, np.array(rows).T))
+
+
+def _read_csv(path: Path, chosen: dict[str, str]) -> list[Sample]:
+    columns = read_csv_columns(path, csv_column_map(path, chosen))
+    return [Sample(float(t), role, float(columns[role][i]))
+            for i, t in enumerate(columns["t"]) for role in ROLES if role in columns]
 
 
 def _check_not_all_nan(path: Path, samples: list[Sample]) -> None:

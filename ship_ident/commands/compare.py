@@ -10,8 +10,8 @@ from ..errors import CommandError
 from ..metrics import free_run_fit
 from ..structure import Structure, require_samples
 from ..jsonio import dumps_json
-from .common import add_data_args, add_json_arg, load_data
-from .identify import format_fit
+from .common import add_data_args, add_json_arg, add_recordings_arg, load_recordings, sources
+from .identify import data_field, format_fit
 
 
 def add_parser(subparsers) -> None:
@@ -21,7 +21,7 @@ def add_parser(subparsers) -> None:
                     "data, starting from the measured heading and yaw rate, and compare the "
                     "free-run heading and yaw rate with the measurements.")
     parser.add_argument("model", metavar="MODEL.json", help="model file written by identify --save")
-    parser.add_argument("data", metavar="DATA", help="rosbag2 directory, .mcap file or CSV file")
+    add_recordings_arg(parser)
     add_json_arg(parser)
     add_data_args(parser)
     parser.set_defaults(func=run)
@@ -44,16 +44,17 @@ def load_model(path) -> tuple[Structure, dict]:
 
 def run(args) -> int:
     structure, parameters = load_model(args.model)
-    dataset = load_data(args, args.data)
+    dataset = load_recordings(args, args.data)
     require_samples(dataset)
     heading, yaw_rate = structure.simulate(parameters, dataset)
     record = {"structure": structure.to_json(), "parameters": parameters, "model_file": str(args.model),
-              "data": str(args.data), "samples": dataset.n_samples,
+              "data": data_field(args.data), "recordings": dataset.meta["recordings"],
+              "samples": dataset.n_samples,
               "fit": free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate)}
     if args.json:
         print(dumps_json(record))
     else:
-        print(f"{structure.label()} from {args.model} run free on {args.data} "
+        print(f"{structure.label()} from {args.model} run free on {sources(args.data)} "
               f"({dataset.n_samples} samples, {dataset.duration:.1f} s)")
         print(format_fit(record["fit"]))
     return 0

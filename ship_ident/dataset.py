@@ -92,15 +92,26 @@ class Dataset:
 def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_time: float,
                     gap_threshold: float | None = None, unwrap_heading: bool = True,
                     meta: dict | None = None) -> Dataset:
-    """Turn asynchronous time series into one uniformly sampled Dataset.
+    """Turn asynchronous time series into one uniformly sampled Dataset (see ``resample_signals``)."""
+    time, values, segments, gaps = resample_signals(series, sample_time, gap_threshold, unwrap_heading)
+    return Dataset(time=time, rudder=values["rudder"], heading=values["heading"], yaw_rate=values["yaw_rate"],
+                   speed=values.get("speed"), segments=segments, gaps=gaps,
+                   meta=dict(meta or {}, sample_time=sample_time))
+
+
+def resample_signals(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_time: float,
+                     gap_threshold: float | None = None, unwrap_heading: bool = True,
+                     required=("rudder", "heading", "yaw_rate")):
+    """Asynchronous time series on one uniform grid: ``(time, {name: values}, segments, gaps)``.
 
     ``series`` maps ``rudder``, ``heading``, ``yaw_rate`` (and optionally
-    ``speed``) to ``(stamps_s, values)``. Non-finite samples are dropped,
+    ``speed``, or any other signal) to ``(stamps_s, values)``; the ``required`` ones must be there.
+    Non-finite samples are dropped,
     stamps sorted and de-duplicated. The grid covers the span where every
     signal has data; values are linearly interpolated (heading after
     unwrapping). Where any signal has no sample for longer than
     ``gap_threshold`` (default 5 sample times) the grid is cut: the gap is
-    reported in ``Dataset.gaps`` and the segments on each side stay apart.
+    reported in ``gaps`` and the segments on each side stay apart.
     """
     if sample_time <= 0:
         raise DataError(f"sample_time must be > 0 s, got {sample_time}")
@@ -118,7 +129,6 @@ def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_tim
         if name == "heading" and unwrap_heading and len(values):
             values = np.unwrap(values)
         clean[name] = (stamps, values)
-    required = ("rudder", "heading", "yaw_rate")
     for name in required:
         if name not in clean or len(clean[name][0]) < 2:
             raise DataError(f"no usable {name} samples (need at least 2 finite samples)")
@@ -151,13 +161,7 @@ def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_tim
     remap[keep_idx] = np.arange(len(keep_idx))
     segments = [(int(remap[a]), int(remap[b - 1]) + 1) for a, b in segments]
     gaps = sorted(set(gaps))
-    return Dataset(
-        time=grid[keep_idx], rudder=out["rudder"][keep_idx], heading=out["heading"][keep_idx],
-        yaw_rate=out["yaw_rate"][keep_idx],
-        speed=out["speed"][keep_idx] if "speed" in out else None,
-        segments=tuple(segments), gaps=tuple(gaps),
-        meta=dict(meta or {}, sample_time=sample_time),
-    )
+    return grid[keep_idx], {name: values[keep_idx] for name, values in out.items()}, tuple(segments), tuple(gaps)
 
 
 def resampled(dataset: Dataset, sample_time: float) -> Dataset:

@@ -12,6 +12,10 @@ rudder), or the user's own mapping (``Topics.csv_columns``, ``--columns``).
 Inputs are ``std_msgs/msg/Float64`` topics stamped with the bag's log time,
 or a ``sensor_msgs/msg/Imu`` topic (ROS ENU convention) for heading and yaw
 rate, converted to our NED convention: psi = pi/2 - yaw_enu, r = -omega_z.
+For the 3-DOF model, the body-fixed velocity comes from a ``nav_msgs/msg/Odometry``
+(its twist, in the child frame) or ``geometry_msgs/msg/TwistStamped`` topic in
+ROS's body frame (x forward, y to port): surge u = linear.x, sway v = -linear.y
+(our v is positive to starboard).
 
 Every unusable input raises ``DataError`` with one sentence saying what is
 wrong and what to do.
@@ -46,8 +50,13 @@ CSV_SYNONYMS = {
     "yaw_rate": ("yaw_rate", "r", "yaw_rate_rad_s", "r_rad_s"),
     "speed": ("speed", "surge_speed", "u", "speed_mps", "u_mps"),
 }
+# The 3-DOF model's body-fixed velocity (m/s, sway positive to starboard).
+VELOCITY_SYNONYMS = {"surge": ("surge_speed", "u", "surge", "u_mps"), "sway": ("sway_speed", "v", "sway", "v_mps")}
+THREEDOF_SYNONYMS = dict({r: CSV_SYNONYMS[r] for r in CSV_COLUMNS[:4]}, **VELOCITY_SYNONYMS)
 FLOAT64 = "std_msgs/msg/Float64"
 IMU = "sensor_msgs/msg/Imu"
+VELOCITY_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistStamped")
+TWIST_STAMPED = VELOCITY_TYPES[1]
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 BAD_BAG_ERRORS = (AnyReaderError, ReaderError, struct.error, EOFError, OSError, ValueError,
                   KeyError, IndexError, AssertionError)
@@ -67,6 +76,7 @@ class Topics:
     yaw_rate: str = "/usv/yaw_rate"
     speed: str = "/usv/speed"
     imu: str = ""
+    velocity: str = ""  # Odometry or TwistStamped topic of the body-fixed velocity (3-DOF model)
     csv_columns: tuple[tuple[str, str], ...] = ()
 
 
@@ -87,8 +97,9 @@ def typestore():
 
 # --- reading -----------------------------------------------------------------
 
-def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
-    """All input samples of a bag or CSV file, time-ordered (see module docstring)."""
+def read_samples(path, topics: Topics = Topics(), csv_roles: dict = CSV_SYNONYMS) -> list[Sample]:
+    """All input samples of a bag or CSV file, time-ordered (see module docstring); a CSV file's
+    columns are those of the roles in ``csv_roles`` (role -> synonyms; all but speed required)."""
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path} does not exist; give a rosbag2 directory, a .mcap file or a CSV file")
@@ -99,7 +110,7 @@ def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
     elif path.suffix.lower() == ".mcap" or _starts_with_mcap_magic(path):
         samples = _read_bag([path], topics)
     elif path.suffix.lower() in (".csv", ".txt"):
-        samples = _read_csv(path, dict(topics.csv_columns))
+        samples = _read_csv(path, dict(topics.csv_columns), csv_roles)
     else:
         raise DataError(f"{path} is neither a bag (rosbag2 directory or .mcap file) nor a CSV file "
                         "(.csv); convert it or rename it")
@@ -164,15 +175,17 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
         wanted["imu"] = topics.imu
     else:
         wanted.update(heading=topics.heading, yaw_rate=topics.yaw_rate)
+    if topics.velocity:
+        wanted["velocity"] = topics.velocity
     missing = [t for role, t in wanted.items() if role != "speed" and t not in found]
     if missing:
         have = ", ".join(f"{t} ({m})" for t, m in sorted(found.items())) or "none"
         raise DataError(f"{name} has no topic {', '.join(missing)}; topics in it: {have}; "
                         "choose the topics with the --*-topic options")
     for role, topic in wanted.items():
-        expected = IMU if role == "imu" else FLOAT64
-        if topic in found and found[topic] != expected:
-            raise DataError(f"{name}: topic {topic} carries {found[topic]}, expected {expected}; "
+        expected = {"imu": (IMU,), "velocity": VELOCITY_TYPES}.get(role, (FLOAT64,))
+        if topic in found and found[topic] not in expected:
+            raise DataError(f"{name}: topic {topic} carries {found[topic]}, expected {' or '.join(expected)}; "
                             "choose another topic")
     role_of = {t: role for role, t in wanted.items() if t in found}
     samples = []
@@ -183,6 +196,8 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
         msg = reader.deserialize(raw, connection.msgtype)
         if role == "imu":
             samples.extend(imu_samples(msg, log_time * 1e-9))
+        elif role == "velocity":
+            samples.extend(velocity_samples(msg, log_time * 1e-9))
         else:
             samples.append(Sample(log_time * 1e-9, role, float(msg.data)))
         count += 1
@@ -193,14 +208,27 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
     return samples
 
 
+def header_time(msg, log_time: float) -> float:
+    """A stamped message's header time in s, or its log time where the header stamp is zero."""
+    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+    return stamp if stamp > 0 else log_time
+
+
 def imu_samples(msg, log_time: float) -> tuple[Sample, Sample]:
     """Heading and yaw rate (NED) from an ENU Imu message, stamped by its header when set."""
-    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-    time = stamp if stamp > 0 else log_time
+    time = header_time(msg, log_time)
     q = msg.orientation
     yaw_enu = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
     return (Sample(time, "heading", wrap_angle(math.pi / 2 - yaw_enu)),
             Sample(time, "yaw_rate", -float(msg.angular_velocity.z)))
+
+
+def velocity_samples(msg, log_time: float) -> tuple[Sample, Sample]:
+    """Surge u and sway v (m/s, v positive to starboard) from an Odometry or TwistStamped message
+    in ROS's body frame (y to port), stamped by its header when set."""
+    time = header_time(msg, log_time)
+    twist = msg.twist.twist if hasattr(msg, "child_frame_id") else msg.twist
+    return Sample(time, "surge", float(twist.linear.x)), Sample(time, "sway", -float(twist.linear.y))
 
 
 def wrap_angle(angle: float) -> float:
@@ -217,8 +245,9 @@ def parse_columns(text: str) -> tuple[tuple[str, str], ...]:
         role, sep, column = (x.strip() for x in item.partition("="))
         if not sep or not role or not column:
             raise DataError(f"--columns item {item!r} is not ROLE=COLUMN; e.g. --columns speed=surge_speed,rudder=delta")
-        if role not in CSV_SYNONYMS:
-            raise DataError(f"--columns: unknown role {role!r}; roles are {', '.join(CSV_SYNONYMS)}")
+        if role not in CSV_SYNONYMS and role not in VELOCITY_SYNONYMS:
+            raise DataError(f"--columns: unknown role {role!r}; roles are "
+                            f"{', '.join([*CSV_SYNONYMS, *VELOCITY_SYNONYMS])}")
         if role in dict(pairs):
             raise DataError(f"--columns names the role {role!r} twice; give each role once")
         pairs.append((role, column))
@@ -234,6 +263,9 @@ def resolve_columns(header: list[str], chosen: dict[str, str], synonyms: dict[st
     found = ", ".join(header) or "none"
     mapping = {}
     for role, column in chosen.items():
+        if role not in synonyms:
+            raise DataError(f"--columns {role}={column}: this model reads no {role}; its roles are "
+                            f"{', '.join(synonyms)}")
         if column not in header:
             raise DataError(f"{source} has no column {column!r} (--columns {role}={column}); its columns: {found}")
         mapping[role] = column
@@ -263,10 +295,12 @@ def _csv_header(path: Path) -> list[str]:
         return [h.strip() for h in next(csv.reader(f), [])]
 
 
-def csv_column_map(path, chosen: dict[str, str] | None = None) -> dict[str, str]:
-    """Role -> CSV column read for the Nomoto roles of ``path`` (see ``resolve_columns``)."""
+def csv_column_map(path, chosen: dict[str, str] | None = None, synonyms=CSV_SYNONYMS,
+                   required=CSV_COLUMNS[:4]) -> dict[str, str]:
+    """Role -> CSV column read for the roles of ``synonyms`` (default: the Nomoto model's) of
+    ``path`` (see ``resolve_columns``)."""
     path = Path(path)
-    return resolve_columns(_csv_header(path), chosen or {}, CSV_SYNONYMS, CSV_COLUMNS[:4], path)
+    return resolve_columns(_csv_header(path), chosen or {}, synonyms, required, path)
 
 
 def is_canonical(mapping: dict[str, str]) -> bool:
@@ -296,14 +330,15 @@ def read_csv_columns(path: Path, mapping: dict[str, str]) -> dict[str, np.ndarra
     return dict(zip(index, np.array(rows).T))
 
 
-def _read_csv(path: Path, chosen: dict[str, str]) -> list[Sample]:
-    columns = read_csv_columns(path, csv_column_map(path, chosen))
+def _read_csv(path: Path, chosen: dict[str, str], roles: dict) -> list[Sample]:
+    mapping = csv_column_map(path, chosen, roles, [r for r in roles if r != "speed"])
+    columns = read_csv_columns(path, mapping)
     return [Sample(float(t), role, float(columns[role][i]))
-            for i, t in enumerate(columns["t"]) for role in ROLES if role in columns]
+            for i, t in enumerate(columns["t"]) for role in columns if role != "t"]
 
 
 def _check_not_all_nan(path: Path, samples: list[Sample]) -> None:
-    for role in ROLES:
+    for role in dict.fromkeys(s.role for s in samples):
         values = [s.value for s in samples if s.role == role]
         if values and not any(math.isfinite(v) for v in values):
             raise DataError(f"{path}: every {role} sample is NaN or Inf; check the sensor or the export")

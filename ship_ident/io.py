@@ -304,8 +304,9 @@ def csv_column_map(path, chosen: dict[str, str] | None = None, synonyms=CSV_SYNO
 
 
 def is_canonical(mapping: dict[str, str]) -> bool:
-    """True when every role is read from the column of its own name."""
-    return all(role == column for role, column in mapping.items())
+    """True when every role is read from its canonical column (the first of its synonyms)."""
+    canonical = {role: names[0] for role, names in {**CSV_SYNONYMS, **VELOCITY_SYNONYMS}.items()}
+    return all(canonical[role] == column for role, column in mapping.items())
 
 
 def read_csv_columns(path: Path, mapping: dict[str, str]) -> dict[str, np.ndarray]:

@@ -70,15 +70,18 @@ def sources(paths) -> str:
     return " + ".join(str(p) for p in paths)
 
 
-def add_model_args(parser: argparse.ArgumentParser, method: bool = True) -> None:
-    """``--model``, ``--effects`` and (optionally) ``--method``."""
-    parser.add_argument("--model", default="nomoto2", choices=("nomoto1", "nomoto2"),
-                        help="base Nomoto model (default %(default)s)")
+def add_model_args(parser: argparse.ArgumentParser, method: bool = True, threedof: bool = False) -> None:
+    """``--model``, ``--effects`` and (optionally) ``--method``; with ``threedof`` the model may be
+    seed 000's ``3dof`` (its --method defaults to tlssvm, so an unset --method is None)."""
+    parser.add_argument("--model", default="nomoto2", choices=("nomoto1", "nomoto2") + (("3dof",) if threedof else ()),
+                        help="base model (default %(default)s)" + ("; 3dof: seed 000's surge-sway-yaw model"
+                                                                   if threedof else ""))
     parser.add_argument("--effects", default="", metavar="A,B",
                         help="comma-separated effects, e.g. rudder_offset,cubic_yaw (default: none)")
     if method:
-        parser.add_argument("--method", default=DEFAULT_METHOD, metavar="NAME",
-                            help=f"estimator: {', '.join(method_names())} (default %(default)s)")
+        parser.add_argument("--method", default=None if threedof else DEFAULT_METHOD, metavar="NAME",
+                            help=f"estimator: {', '.join(method_names())} (default {DEFAULT_METHOD}"
+                                 + ("; with --model 3dof: tlssvm or ols, default tlssvm)" if threedof else ")"))
 
 
 def structure_from_args(args: argparse.Namespace) -> Structure:

@@ -12,6 +12,7 @@ from ..structure import Structure, require_samples
 from ..jsonio import dumps_json
 from .common import add_data_args, add_json_arg, add_recordings_arg, load_recordings, sources
 from .identify import data_field, format_fit
+from .threedof import add_threedof_args, run_compare
 
 
 def add_parser(subparsers) -> None:
@@ -24,26 +25,44 @@ def add_parser(subparsers) -> None:
     add_recordings_arg(parser)
     add_json_arg(parser)
     add_data_args(parser)
+    add_threedof_args(parser, fitting=False)
     parser.set_defaults(func=run)
 
 
-def load_model(path) -> tuple[Structure, dict]:
-    """Structure and parameters (SI) of a model file written by ``identify --save``."""
-    path = Path(path)
+def model_file_error(path, err: Exception) -> CommandError:
+    return CommandError(f"{path} is not a model file written by `ship-ident identify --save` "
+                        f"({type(err).__name__}: {err}); identify the model again with --save")
+
+
+def read_model_file(path) -> dict:
+    """The JSON record of a model file."""
     try:
-        record = json.loads(path.read_text())
+        record = json.loads(Path(path).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise model_file_error(path, err) from None
+    if not isinstance(record, dict):
+        raise model_file_error(path, TypeError("not a JSON object"))
+    return record
+
+
+def load_model(path, record: dict | None = None) -> tuple[Structure, dict]:
+    """Structure and parameters (SI) of a Nomoto model file written by ``identify --save``."""
+    record = read_model_file(path) if record is None else record
+    try:
         structure = Structure(record["structure"]["model"], record["structure"]["effects"])
         parameters = {name: float(record["parameters"][name]) for name in structure.parameter_names}
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as err:
-        raise CommandError(f"{path} is not a model file written by `ship-ident identify --save` "
-                           f"({type(err).__name__}: {err}); identify the model again with --save") from None
+    except (KeyError, TypeError) as err:
+        raise model_file_error(path, err) from None
     if not all(np.isfinite(list(parameters.values()))):
         raise CommandError(f"{path} holds non-finite parameters; identify the model again")
     return structure, parameters
 
 
 def run(args) -> int:
-    structure, parameters = load_model(args.model)
+    record = read_model_file(args.model)
+    if isinstance(record.get("structure"), dict) and record["structure"].get("model") == "3dof":
+        return run_compare(args, record)
+    structure, parameters = load_model(args.model, record)
     dataset = load_recordings(args, args.data)
     require_samples(dataset)
     heading, yaw_rate = structure.simulate(parameters, dataset)

@@ -5,31 +5,35 @@ import math
 from pathlib import Path
 
 from ..errors import CommandError
-from ..estimators import make_estimator
+from ..estimators import DEFAULT_METHOD, make_estimator
 from ..estimators.base import excitation_shortfall
 from ..structure import require_samples
 from ..jsonio import dumps_json
 from .common import (add_data_args, add_json_arg, add_model_args, add_recordings_arg, load_recordings,
                      sources, structure_from_args)
+from .threedof import add_threedof_args, run_identify
 
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "identify", help="identify a Nomoto model from a bag or CSV file",
-        description="Fit a Nomoto model (plus effects) to recorded or simulated data and report "
-                    "parameters, standard errors and the free-run fit.")
+        "identify", help="identify a Nomoto (or 3-DOF) model from bags or CSV files",
+        description="Fit a Nomoto model (plus effects), or seed 000's 3-DOF model, to recorded or "
+                    "simulated data and report parameters, standard errors and the free-run fit.")
     add_recordings_arg(parser)
-    add_model_args(parser)
+    add_model_args(parser, threedof=True)
     parser.add_argument("--save", metavar="MODEL.json", help="write the estimate as a model file "
                         "for `ship-ident compare`")
     add_json_arg(parser)
     add_data_args(parser)
+    add_threedof_args(parser)
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
+    if args.model == "3dof":
+        return run_identify(args)
     structure = structure_from_args(args)
-    estimator = make_estimator(args.method)
+    estimator = make_estimator(args.method or DEFAULT_METHOD)
     dataset = load_recordings(args, args.data)
     require_samples(dataset)
     require_excitation(dataset)

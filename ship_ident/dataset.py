@@ -62,11 +62,17 @@ class Dataset:
         return float(self.time[-1] - self.time[0]) if self.n_samples else 0.0
 
     def slice(self, start: int, stop: int) -> "Dataset":
-        """The samples ``[start, stop)`` as a new Dataset, segments clipped."""
+        """The samples ``[start, stop)`` as a new Dataset, segments and the recordings' sample
+        ranges (``meta["recordings"]``) clipped."""
         segs = tuple((max(a, start) - start, min(b, stop) - start)
                      for a, b in self.segments if min(b, stop) > max(a, start))
+        meta = self.meta
+        if "recordings" in meta:
+            meta = dict(meta, recordings=[
+                dict(r, start=max(r["start"], start) - start, stop=min(r["stop"], stop) - start)
+                for r in meta["recordings"] if min(r["stop"], stop) > max(r["start"], start)])
         return replace(
-            self,
+            self, meta=meta,
             time=self.time[start:stop], rudder=self.rudder[start:stop],
             heading=self.heading[start:stop], yaw_rate=self.yaw_rate[start:stop],
             speed=None if self.speed is None else self.speed[start:stop],

@@ -326,6 +326,10 @@ def test_joined_recordings_are_named_and_resampled_to_one_step():
     np.testing.assert_allclose(joined.yaw_rate[n::2], coarse.yaw_rate, rtol=0, atol=1e-12)  # 0.2 s samples kept
     midpoints = 0.5 * (coarse.yaw_rate[:-1] + coarse.yaw_rate[1:])
     np.testing.assert_allclose(joined.yaw_rate[n + 1::2], midpoints, rtol=0, atol=1e-12)
+    tail = joined.slice(n - 10, joined.n_samples)                 # e.g. a held-out tail
+    assert tail.meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": 10},
+                                       {"name": "turning.mcap", "start": 10, "stop": 211}]
+    assert joined.slice(0, 5).meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": 5}]
     on_coarse = join_recordings([fine, coarse], sample_time=0.2)
     assert on_coarse.sample_time == pytest.approx(0.2) and on_coarse.n_samples == (n + 1) // 2 + 101
 

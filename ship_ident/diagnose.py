@@ -36,7 +36,7 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from .dataset import DataError, Dataset
+from .dataset import DataError, Dataset, join_recordings  # noqa: F401 (re-exported)
 from .effects import EFFECTS, Evidence
 from .estimators import Estimate, OutputError, make_estimator
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
@@ -172,30 +172,6 @@ def split(dataset: Dataset, training_fraction: float = TRAINING_FRACTION) -> tup
         raise DataError(f"{dataset.duration:.0f} s of data leave less than {MIN_HELD_OUT_S:.0f} s to "
                         "hold out for validation; record a longer run")
     return dataset.slice(0, cut), dataset.slice(cut, dataset.n_samples)
-
-
-def join_recordings(recordings: list[Dataset]) -> Dataset:
-    """Several recordings on one sample time as one Dataset, each its own segment (never bridged):
-    the held-out data of a cross-manoeuvre diagnosis on more than one run."""
-    if len(recordings) == 1:
-        return recordings[0]
-    h = recordings[0].sample_time
-    if any(not np.isclose(r.sample_time, h, rtol=1e-3) for r in recordings):
-        raise DataError("the validation recordings have different sample times; give --sample-time")
-    times, segments, gaps, start, t0 = [], [], [], 0, 0.0
-    for r in recordings:
-        shift = t0 - r.time[0]
-        if times:
-            gaps.append((float(times[-1][-1]), t0))
-        times.append(r.time + shift)
-        segments += [(a + start, b + start) for a, b in r.segments]
-        gaps += [(g0 + shift, g1 + shift) for g0, g1 in r.gaps]
-        start += r.n_samples
-        t0 = float(r.time[-1] + shift + 2 * h)
-    join = (lambda name: np.concatenate([getattr(r, name) for r in recordings]))
-    speed = None if any(r.speed is None for r in recordings) else join("speed")
-    return Dataset(np.concatenate(times), join("rudder"), join("heading"), join("yaw_rate"), speed,
-                   tuple(segments), tuple(gaps), dict(recordings[0].meta))
 
 
 def windows(dataset: Dataset, length_s: float) -> Dataset:

@@ -27,7 +27,6 @@ import math
 import shutil
 import struct
 import tempfile
-from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -38,8 +37,8 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import Stores, get_typestore
 
 from .dataset import DataError, Dataset, resample_series
+from .samples import ROLES, Sample, Topics  # noqa: F401 (re-exported for the adapter's users)
 
-ROLES = ("rudder", "heading", "yaw_rate", "speed")
 CSV_COLUMNS = ("t", "rudder", "heading", "yaw_rate", "speed")  # speed optional
 # Column names read as each role without --columns (matched case-insensitively, SI units only),
 # the canonical name first; a public simulator's CSV names the speed surge_speed.
@@ -64,29 +63,6 @@ BAD_BAG_ERRORS = (AnyReaderError, ReaderError, struct.error, EOFError, OSError, 
 
 class UnreadableBag(DataError):
     """A bag whose files cannot be parsed (corrupt, truncated, unsupported metadata)."""
-
-
-@dataclass(frozen=True)
-class Topics:
-    """Input names: bag topics (when ``imu`` is set, heading and yaw rate come from that Imu topic)
-    and, for CSV files, the user's (role, column) pairs ``csv_columns`` (see ``parse_columns``)."""
-
-    rudder: str = "/usv/rudder"
-    heading: str = "/usv/heading"
-    yaw_rate: str = "/usv/yaw_rate"
-    speed: str = "/usv/speed"
-    imu: str = ""
-    velocity: str = ""  # Odometry or TwistStamped topic of the body-fixed velocity (3-DOF model)
-    csv_columns: tuple[tuple[str, str], ...] = ()
-
-
-@dataclass(frozen=True)
-class Sample:
-    """One measurement: time in s, role in ROLES, value in SI units (NED)."""
-
-    time: float
-    role: str
-    value: float
 
 
 @lru_cache(maxsize=1)

@@ -32,7 +32,7 @@ from .jsonio import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import DEFAULT_METHOD, MethodError, make_estimator
 from .estimators.base import MIN_RUDDER_STD
-from .io import ROLES, Sample, Topics
+from .samples import ROLES, Sample, Topics
 from .structure import Structure, StructureError
 
 REQUIRED_ROLES = ("rudder", "heading", "yaw_rate")

@@ -37,7 +37,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import Stores, get_typestore
 
 from .dataset import DataError, Dataset, resample_series
-from .samples import ROLES, Sample, Topics  # noqa: F401 (re-exported for the adapter's users)
+from .samples import ROLES, Sample, Topics
 
 CSV_COLUMNS = ("t", "rudder", "heading", "yaw_rate", "speed")  # speed optional
 # Column names read as each role without --columns (matched case-insensitively, SI units only),

@@ -135,7 +135,7 @@ class ReplayWriter:
             self._writer.write(PARAMETERS_TOPIC, "std_msgs/msg/Float64MultiArray",
                                self._MultiArray(layout=layout, data=values), record.time)
 
-    def __enter__(self) -> "ReplayWriter":
+    def __enter__(self) -> ReplayWriter:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -151,7 +151,7 @@ class _NoWriter:
     def write_record(self, record) -> None:
         pass
 
-    def __enter__(self) -> "_NoWriter":
+    def __enter__(self) -> _NoWriter:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -57,6 +57,7 @@ IMU = "sensor_msgs/msg/Imu"
 VELOCITY_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistStamped")
 TWIST_STAMPED = VELOCITY_TYPES[1]
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+DEFAULT_TOPICS = Topics()  # the node's default topic names
 BAD_BAG_ERRORS = (AnyReaderError, ReaderError, struct.error, EOFError, OSError, ValueError,
                   KeyError, IndexError, AssertionError)
 
@@ -73,7 +74,7 @@ def typestore():
 
 # --- reading -----------------------------------------------------------------
 
-def read_samples(path, topics: Topics = Topics(), csv_roles: dict = CSV_SYNONYMS) -> list[Sample]:
+def read_samples(path, topics: Topics = DEFAULT_TOPICS, csv_roles: dict = CSV_SYNONYMS) -> list[Sample]:
     """All input samples of a bag or CSV file, time-ordered (see module docstring); a CSV file's
     columns are those of the roles in ``csv_roles`` (role -> synonyms; all but speed required)."""
     path = Path(path)
@@ -95,7 +96,7 @@ def read_samples(path, topics: Topics = Topics(), csv_roles: dict = CSV_SYNONYMS
     return samples
 
 
-def load_dataset(path, topics: Topics = Topics(), sample_time: float = 0.1) -> Dataset:
+def load_dataset(path, topics: Topics = DEFAULT_TOPICS, sample_time: float = 0.1) -> Dataset:
     """A bag or CSV file resampled onto a uniform grid (gaps split segments, heading unwrapped);
     for a CSV file ``meta["columns"]`` maps each role to the column read."""
     samples = read_samples(path, topics)
@@ -220,7 +221,8 @@ def parse_columns(text: str) -> tuple[tuple[str, str], ...]:
     for item in filter(None, (part.strip() for part in text.split(","))):
         role, sep, column = (x.strip() for x in item.partition("="))
         if not sep or not role or not column:
-            raise DataError(f"--columns item {item!r} is not ROLE=COLUMN; e.g. --columns speed=surge_speed,rudder=delta")
+            raise DataError(f"--columns item {item!r} is not ROLE=COLUMN; "
+                            "e.g. --columns speed=surge_speed,rudder=delta")
         if role not in CSV_SYNONYMS and role not in VELOCITY_SYNONYMS:
             raise DataError(f"--columns: unknown role {role!r}; roles are "
                             f"{', '.join([*CSV_SYNONYMS, *VELOCITY_SYNONYMS])}")
@@ -366,7 +368,7 @@ class BagWriter:
             next(self._bag_dir.glob("*.mcap")).replace(self.path)
             shutil.rmtree(self._bag_dir.parent)
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self
 
     def __exit__(self, *exc) -> None:

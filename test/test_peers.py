@@ -4,8 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from ship_ident.bench import benchmarks
-from ship_ident.bench import peer_experiments, peers
+from ship_ident.bench import benchmarks, peer_experiments, peers
 from ship_ident.bench.peer_rendering import OURS_LABEL
 
 

@@ -18,8 +18,16 @@ from ..samples import Sample, Topics
 from ..simulator import Noise, simulate
 from . import progress
 from .efficiency import QUANTITIES, _with_derived, record_bound, summarise
-from .peer_models import (STRUCTURE, ParameterUKF, RecursiveLeastSquares, fit_dual, fit_frols, frols_held_out_rmse,
-                          held_out_rmse, ukf_start)
+from .peer_models import (
+    STRUCTURE,
+    ParameterUKF,
+    RecursiveLeastSquares,
+    fit_dual,
+    fit_frols,
+    frols_held_out_rmse,
+    held_out_rmse,
+    ukf_start,
+)
 
 ONLINE = OnlineConfig()                 # the node's defaults: window, refit period, method
 OURS = (DEFAULT_METHOD, "rwlssvm+oe", "rwlssvm")

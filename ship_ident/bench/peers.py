@@ -45,8 +45,17 @@ import os
 import platform
 
 from . import register
-from .peer_experiments import (ONLINE, RECOVERY_TOLERANCE, TRACKING_MANEUVERS, accuracy, dataset_samples,
-                               online_trace, recovery_time, speed_and_scaling, tracking)
+from .peer_experiments import (
+    ONLINE,
+    RECOVERY_TOLERANCE,
+    TRACKING_MANEUVERS,
+    accuracy,
+    dataset_samples,
+    online_trace,
+    recovery_time,
+    speed_and_scaling,
+    tracking,
+)
 from .peer_rendering import plot, render
 
 # The peers live in peer_models, the experiments in peer_experiments, the tables and plots in peer_rendering;

@@ -39,7 +39,7 @@ MIN_LEVEL = math.radians(0.01) ** 2  # (rad/s)^2: no yaw-rate sensor resolves fi
 REFERENCE_RELATIVE_ERRORS = {"K": 0.05, "T": 0.2, "T1": 0.2}
 
 
-def _blocks(dataset: Dataset, n: int, offset: int = 0) -> tuple:
+def whole_blocks(dataset: Dataset, n: int, offset: int = 0) -> tuple:
     """Half-open index ranges of whole blocks of n samples inside the dataset's segments."""
     return tuple((a, a + n) for start, stop in dataset.segments
                  for a in range(start + offset, stop - n + 1, n))
@@ -74,7 +74,7 @@ class ChangeDetector:
                    for name, limit in REFERENCE_RELATIVE_ERRORS.items() if name in params):
             return
         n = int(round(self.length / dataset.sample_time))
-        blocks = _blocks(dataset, n) + _blocks(dataset, n, n // 2)
+        blocks = whole_blocks(dataset, n) + whole_blocks(dataset, n, n // 2)
         errors = block_errors(structure, params, dataset, blocks)
         if len(errors):
             floor = max(noise_level(dataset.yaw_rate, 0.0) ** 2, MIN_LEVEL)

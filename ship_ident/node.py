@@ -70,7 +70,10 @@ PARAMETER_DOCS = {
     "min_fit_correlation": ("free-run yaw-rate correlation below which the fit is reported poor",
                             (0.0, 1.0), False),
     "stale_timeout": ("s without a sample before an input is reported stale", (0.01, 3600.0), False),
-    "gap_threshold": ("s without a sample that splits the window into segments", (0.01, 3600.0), False),
+    "gap_threshold": ("s without a sample that splits the window into segments (>= sample_time); "
+                      "0: five sample times", (0.0, 3600.0), False),
+    "rudder_limit": ("rad, the steering gear's limit: a rudder held there for half the window is "
+                     "reported rudder_saturated", (0.01, 1.5708), False),
     "clock_jump_threshold": ("s; a clock step back this large resets the window", (0.01, 3600.0), False),
     "max_window_samples": ("hard bound on stored samples per input (about 110 bytes each)",
                            (100, MAX_WINDOW_SAMPLES), False),

@@ -27,11 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .change import ChangeDetector, block_errors, whole_blocks
+from .change import ChangeDetector, block_errors, covering_blocks, fit_gain
 from .jsonio import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import DEFAULT_METHOD, MethodError, make_estimator
-from .estimators.base import MIN_RUDDER_STD, excitation_shortfall
+from .estimators.base import MIN_RUDDER_STD, Estimate, excitation_shortfall
+from .metrics import free_run_fit
 from .io import ROLES, Sample, Topics
 from .structure import Structure, StructureError
 
@@ -90,8 +91,14 @@ GAP_SAMPLES = 5                     # gap_threshold 0: an input pause of this ma
 JUMP_STANDARD_ERRORS = 5.0          # a jump beyond this many joint standard errors needs evidence
 CLEAR_IMPROVEMENT = 2.0             # ... its free run over the newest data this many times better
                                     # (mean squares) than the last good one's, or the next refit agreeing
-FREE_RUN_TOLERANCE = 1.05           # a new estimate's free run may miss the window at most this much
+FREE_RUN_TOLERANCE = 1.25           # a new estimate's free run may miss the window at most this much
                                     # more (mean squares) than the last good one's
+# Refitted on the new data after a change, the first set the data determine: the gain with the main
+# time constant, or alone, once the new data span this many main time constants (of the last good
+# estimate; shorter, the free run's unknown start dominates). The rudder offset is held: loading does
+# not move it, and a held rudder cannot tell it from the gain.
+GAIN_FITS = ((("K", "T", "T1"), 4.0), (("K",), 2.0))
+MIN_GAIN_SAMPLES = 20              # new samples needed for the gain refit after a change
 SCATTER_PAIRS = 20                  # successive estimates whose scatter sets the published uncertainty
 
 REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
@@ -287,7 +294,7 @@ class OnlineIdentifier:
         self._last_jump = 0.0
         self._last_good = None      # Estimate of the current structure
         self._last_good_window = (math.nan, math.nan)
-        self._change = ChangeDetector(config.change_ratio, config.change_test_length)
+        self._change = ChangeDetector(config.change_ratio, config.change_test_length, _short_test(config))
         self._window_floor = -math.inf  # s: where the vessel last changed; older data are dropped
         self._change_note = None    # sentence reported until the first estimate after a change
         self._candidate = None      # the last estimate held for jumping: the next may confirm it
@@ -307,6 +314,7 @@ class OnlineIdentifier:
                 self._change.forget()
                 self._scatter.forget()
             self._change.ratio, self._change.length = config.change_ratio, config.change_test_length
+            self._change.short = _short_test(config)
             if config.refit_period != self._config.refit_period and self._next_due is not None:
                 self._next_due = min(self._next_due, self._latest_time + config.refit_period)
             self._config = config
@@ -410,7 +418,8 @@ class OnlineIdentifier:
         conditions.update(_truncation(config, series, full, now))
         conditions.update(_heading_plausibility(series))
         record = RefitRecord(time=now, conditions=conditions, counts=counts)
-        if "no_data" not in conditions and "window_filling" not in conditions:
+        if "no_data" not in conditions and ("window_filling" not in conditions
+                                            or (change_note and last_good is not None)):
             self._fit(config, series, last_good, record)
         if record.estimate is None and last_good is not None:
             record.estimate = last_good.to_json()
@@ -463,8 +472,10 @@ class OnlineIdentifier:
         structure = config.structure()
         if last_good is not None and self._change_note is None:
             dataset = self._test_for_change(config, structure, dataset, record)
-            if dataset is None:
-                return
+        if self._change_note is not None and last_good is not None \
+                and dataset.duration < config.min_window_length - 0.5 * config.sample_time:
+            self._follow_gain(config, structure, dataset, last_good, record)
+            return
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.gaps:
             longest = max(b - a for a, b in dataset.gaps)
@@ -515,25 +526,69 @@ class OnlineIdentifier:
         if distrust:
             record.conditions["implausible_estimate"] = f"{distrust}; keeping the last good estimate"
             return
-        self._scatter.add(estimate)
+        self._publish(config, structure, estimate, published, dataset, record)
+        if dataset.duration >= config.window_length - 1.5 * config.sample_time:
+            self._change.calibrate(structure, estimate, dataset)  # a full window's model
+        with self._lock:
+            self._change_note = None
+
+    def _publish(self, config, structure, estimate, published, dataset, record, scatter=True) -> None:
+        """Make ``published`` (``estimate`` with the published standard errors) the estimate in force;
+        ``scatter``: a full fit, whose scatter about the next ones sets their published errors."""
+        if scatter:
+            self._scatter.add(estimate)
         record.estimate = published.to_json()
         record.estimate.pop("info", None)
         record.new_estimate = True
         record.predicted_yaw_rate, record.measured_yaw_rate = self._predict(
             config, structure, estimate.parameters, dataset)
-        if dataset.duration >= config.window_length - 1.5 * config.sample_time:
-            self._change.calibrate(structure, estimate, dataset)  # a full window's model
         with self._lock:
             if (config.model, config.effects) == (self._config.model, self._config.effects):
                 self._last_good, self._last_good_window = published, record.window
-            self._change_note = None
             self._candidate = None
+
+    def _follow_gain(self, config, structure, dataset, last_good, record) -> None:
+        """After a change, while the new data are shorter than ``min_window_length``: the first set
+        of GAIN_FITS they span and determine (K with the main time constant T1 or T, or K alone) refitted
+        on them, run free in blocks of ``change_test_length``, the other parameters held from the
+        last good estimate (a free run is almost linear in K; a held rudder determines it);
+        published when they determine K and pass the checks of any new estimate."""
+        record.window = (float(dataset.time[0]), float(dataset.time[-1]))
+        if dataset.n_samples < MIN_GAIN_SAMPLES:
+            return
+        blocks = covering_blocks(dataset, int(round(config.change_test_length / dataset.sample_time)))
+        time_constant = last_good.parameters.get("T1", last_good.parameters.get("T"))
+        fits = [names for names, spans in GAIN_FITS if dataset.duration >= spans * time_constant]
+        if not fits:
+            return
+        try:
+            for names in fits:  # the most the new data determine
+                params, errors = fit_gain(structure, last_good.parameters, dataset, blocks, names)
+                if not excitation_shortfall(dataset, params, errors):
+                    break
+            psi, r = structure.simulate(params, dataset)
+        except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
+            record.conditions["refit_failed"] = f"gain refit after the change: {type(exc).__name__}: {exc}"
+            return
+        fit = free_run_fit(dataset.heading, dataset.yaw_rate, psi, r)
+        estimate = Estimate(structure, last_good.method, params, dict(last_good.std_errors, **errors), fit,
+                            dataset.n_samples, flags=["diverged"] if fit["diverged"] else [], window=record.window)
+        undetermined = "it diverged" if fit["diverged"] else excitation_shortfall(
+            dataset, {n: params[n] for n in errors}, errors)
+        reason = undetermined or self._distrust(config, structure, estimate, dataset, last_good)
+        if reason:
+            record.conditions["too_little_excitation" if undetermined else "implausible_estimate"] = (
+                f"gain refit on the {dataset.duration:.0f} s since the change: {reason}; keeping the last "
+                "good estimate")
+            return
+        self._publish(config, structure, estimate, estimate, dataset, record, scatter=False)
 
     def _distrust(self, config, structure, estimate, dataset, last_good) -> str | None:
         """Why a new estimate (published standard errors) must not replace the last good one, or None.
 
         It sits on a physical bound; or its free run misses this window more than the last good
-        estimate's (FREE_RUN_TOLERANCE, mean squares over blocks of ``change_test_length``); or its
+        estimate's (FREE_RUN_TOLERANCE, mean squares over blocks of ``change_test_length``, each run
+        free from the measured state); or its
         gain or main time constant jumps beyond JUMP_STANDARD_ERRORS joint standard errors from the
         last good one, and neither does its free run over the newest ``change_test_length`` s beat
         the last good one's CLEAR_IMPROVEMENT times (a changed vessel shows there first), nor does
@@ -544,7 +599,7 @@ class OnlineIdentifier:
         if last_good is None or last_good.structure.label() != structure.label():
             return None
         n = int(round(config.change_test_length / dataset.sample_time))
-        blocks = whole_blocks(dataset, n) or tuple(dataset.segments)
+        blocks = covering_blocks(dataset, n)
         new_error, old_error = (float(np.mean(block_errors(structure, p, dataset, blocks)))
                                 for p in (estimate.parameters, last_good.parameters))
         if not new_error <= FREE_RUN_TOLERANCE * old_error:
@@ -571,26 +626,24 @@ class OnlineIdentifier:
 
     def _test_for_change(self, config, structure, dataset, record):
         """Run the change test; on a change, restart the window where it happened and return the
-        data after it (None when they are too few for a fit yet)."""
+        data after it."""
         try:
             ratio, changed_at = self._change.test(structure, dataset)
         except (DataError, StructureError, ValueError):
             return dataset
         if changed_at is None:
             return dataset
-        note = (f"the newest model fitted before the last {config.change_test_length:g} s mispredicts them "
+        note = (f"the newest model fitted before the newest data (the last {_short_test(config):g} or "
+                f"{config.change_test_length:g} s) mispredicts them "
                 f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
                 f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
-                f"the window restarts at {changed_at:.1f} s, where the error stepped up (new estimate "
-                f"from {config.min_window_length:g} s of new data)")
+                f"the window restarts at {changed_at:.1f} s, where the error stepped up (K refitted on the "
+                f"new data with the time constants held until they span {config.min_window_length:g} s)")
         with self._lock:
             self._window_floor, self._change_note = changed_at, note
             self._scatter.forget()  # the new response's estimates scatter about other values
         record.conditions["vessel_changed"] = note
-        dataset = dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
-        if dataset.duration < config.min_window_length - 0.5 * config.sample_time:
-            return None
-        return dataset
+        return dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
 
     @staticmethod
     def _predict(config, structure, params, dataset) -> tuple[float, float]:
@@ -679,6 +732,12 @@ def _rudder_saturation(rudder: np.ndarray, limit: float) -> dict:
                                          f"{100 * share:.0f} % of the window (saturated or stuck): "
                                          "the fit rests on the remaining samples")}
     return {}
+
+
+def _short_test(config: OnlineConfig) -> float:
+    """s of newest data of the change detector's quick test: one refit period, 3 s to a third of
+    ``change_test_length``."""
+    return min(max(config.refit_period, 3.0), config.change_test_length / 3)
 
 
 def _on_bound(structure: Structure, params: dict) -> str:

@@ -430,3 +430,21 @@ def test_a_well_determined_window_is_used_whatever_its_yaw_rate_spread():
     assert all(abs(r.estimate["parameters"]["K"] / sim.truth["K"] - 1) < 0.1 for r in new)
     still = simulate("zigzag10", duration=200.0, seed=2, amplitude=np.radians(0.2))
     assert "the rudder hardly moves" in excitation_shortfall(still.dataset)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("maneuver", ["random", "mixed"])
+def test_a_changed_vessel_is_followed_within_10_s(maneuver):
+    """bench peers' tracking scenarios: seed 001's vessel loses 30 % of K (T1 +30 %) at 600 s; the
+    newest refit period's free run gives it away at the first refit the rudder moves in (the mixed
+    manoeuvre holds it amidships until 607.5 s), and K refitted on the new data (T1 refitted or held
+    as they allow) is within 5 % of the new value from 10 s on."""
+    from ship_ident.bench.peers import dataset_samples, recovery_time
+    change = 600.0
+    sim = simulate(maneuver, "seed001", duration=2 * change, seed=31,
+                   change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}))
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig()), dataset_samples(sim.dataset)))
+    alarms = [r.time for r in records if "vessel_changed" in r.conditions]
+    assert alarms and change < alarms[0] <= change + 10.0
+    times, ks = k_trace(records)
+    assert recovery_time(times, ks, change, sim.info["truth_after"]["K"]) <= 10.0

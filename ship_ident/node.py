@@ -80,8 +80,9 @@ PARAMETER_DOCS = {
     "prediction_horizon": ("s of free run from the measured state behind ~/predicted_yaw_rate",
                            (0.1, 3600.0), False),
     "change_ratio": ("ratio (mean squares) of the last model's free-run yaw-rate error over the newest "
-                     "change_test_length s to its usual level beyond which, on two refits in a row, the "
-                     "vessel counts as changed and the window restarts; 0: never", (0.0, 1e6), False),
+                     "change_test_length s to its usual level beyond which, on two refits in a row (or 4x it "
+                     "once over the newest refit period), the vessel counts as changed and the window "
+                     "restarts; 0: never", (0.0, 1e6), False),
     "change_test_length": ("s of newest data the change test runs the last model over", (1.0, 3600.0), False),
     "qos_reliability": ("input QoS reliability: best_effort (sensor data) or reliable", None, True),
     "qos_depth": ("input QoS history depth (messages kept per topic)", (1, 10000), True),

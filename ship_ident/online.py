@@ -415,11 +415,12 @@ class OnlineIdentifier:
         conditions = self._input_conditions(config, series, newest, now, fresh, last_jump)
         if change_note:
             conditions["vessel_changed"] = change_note
+            if last_good is not None:  # the new data are being fitted (K first): not a first fit
+                conditions.pop("window_filling", None)
         conditions.update(_truncation(config, series, full, now))
         conditions.update(_heading_plausibility(series))
         record = RefitRecord(time=now, conditions=conditions, counts=counts)
-        if "no_data" not in conditions and ("window_filling" not in conditions
-                                            or (change_note and last_good is not None)):
+        if "no_data" not in conditions and "window_filling" not in conditions:
             self._fit(config, series, last_good, record)
         if record.estimate is None and last_good is not None:
             record.estimate = last_good.to_json()

@@ -44,6 +44,12 @@ def add_parser(subparsers) -> None:
                         help="s of bag time between refits (default %(default)s)")
     parser.add_argument("--min-window-length", type=float, default=DEFAULTS.min_window_length,
                         metavar="S", help="s of data before the first fit (default %(default)s)")
+    parser.add_argument("--gap-threshold", type=float, default=DEFAULTS.gap_threshold, metavar="S",
+                        help="s without a sample that splits the window; 0: five sample times "
+                             "(default %(default)s)")
+    parser.add_argument("--rudder-limit", type=float, default=math.degrees(DEFAULTS.rudder_limit),
+                        metavar="DEG", help="the steering gear's limit in deg: a rudder held there is "
+                                            "rudder_saturated (default %(default).0f)")
     parser.add_argument("--change-ratio", type=float, default=DEFAULTS.change_ratio, metavar="R",
                         help="restart the window where the vessel changed, when the newest 30 s are "
                              "mispredicted R times worse (mean squares) than usual; 0: never "
@@ -62,7 +68,8 @@ def config_from_args(args, topics: Topics, has_speed: bool) -> OnlineConfig:
         speed_topic=topics.speed if has_speed else "", imu_topic=topics.imu,
         sample_time=args.sample_time, window_length=args.window_length,
         refit_period=args.refit_period, min_window_length=min(args.min_window_length, args.window_length),
-        change_ratio=args.change_ratio,
+        change_ratio=args.change_ratio, gap_threshold=args.gap_threshold,
+        rudder_limit=math.radians(args.rudder_limit),
         model=args.model, effects=args.effects, method=args.method).validate()
 
 

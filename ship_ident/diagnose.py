@@ -37,7 +37,7 @@ from multiprocessing import get_context
 import numpy as np
 
 from .dataset import DataError, Dataset
-from .effects import EFFECTS, Evidence
+from .effects import EFFECTS, Evidence, StartContext
 from .estimators import Estimate, OutputError, make_estimator
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
 from .signals import Signals, compute_signals, noise_level
@@ -397,17 +397,23 @@ def parameter_warnings(estimate: Estimate) -> list[dict]:
 # --- the diagnosis ---------------------------------------------------------------
 def _fit(structure: Structure, training: Dataset, method: str, nested: dict | None = None) -> Estimate:
     """Fit by ``method``. An iterative refinement (``+oe``, ``+pem``) also starts from ``nested``,
-    the parameters of the model without its last effect, with that effect at its neutral value:
-    the model with the effect then never starts worse than the model without it. (On KVLCC2 the
-    regression start of nomoto1 + cubic_yaw is course-unstable, T < 0, and the search from its
-    clipped values ends in a local minimum whose fit residual is 60 times nomoto1's.)"""
+    the parameters of the model without its last effect, with that effect at its neutral value,
+    and from the last effect's own ``starts`` (a grid over a parameter with several minima, e.g.
+    the rudder delay); the search goes on from whichever start simulates closest to the data, so
+    the model with the effect never ends worse on the training data than the model without it.
+    (On KVLCC2 the regression start of nomoto1 + cubic_yaw is course-unstable, T < 0, and the
+    search from its clipped values ends in a local minimum whose fit residual is 60 times nomoto1's.)"""
     estimator = make_estimator(method)
     if nested is None or not isinstance(estimator, OutputError):
         return estimator.fit(structure, training)
     start = dict(nested)
     for effect in structure.effects:
         start.update({k: v for k, v in effect.neutral().items() if k not in nested})
-    return estimator.refine(structure, training, estimator.start.fit(structure, training), starts=(start,))
+    bare = structure.with_effects(structure.effect_names[:-1])
+    context = StartContext(training, dict(nested), lambda data: estimator.start.fit(bare, data).parameters)
+    extra = [dict(start, **s) for s in structure.effects[-1].starts(context)] if structure.effects else []
+    return estimator.refine(structure, training, estimator.start.fit(structure, training),
+                            starts=(start, *extra))
 
 
 def _refit_task(args) -> Estimate | str:

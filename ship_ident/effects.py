@@ -16,7 +16,8 @@ changes. Register it with ``register_effect`` (see README, "Adding an effect").
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
@@ -64,6 +65,17 @@ class Evidence:
     feature_label: str = ""
     feature_scale: float = 1.0
     residual: np.ndarray | None = None
+
+
+@dataclass
+class StartContext:
+    """What an effect's ``starts`` reads: the training data (a ``Dataset``), ``nested``, the fitted
+    parameters of the model without the effect, and ``refit(dataset)``, that model's cheap
+    regression fit (parameters) on other data, e.g. the training data seen through the effect."""
+
+    training: object
+    nested: dict
+    refit: Callable[[object], dict]
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
@@ -123,6 +135,12 @@ class Effect:
         """Values of the free parameters at which the effect does nothing: the model without it,
         where a fit with the effect can start (every effect here vanishes at zero)."""
         return {p.name: 0.0 for p in self.parameters if p.name not in getattr(self, "fixed", ())}
+
+    def starts(self, context: StartContext) -> list[dict]:
+        """Extra starting points (full parameter sets) for a fit with this effect, for parameters
+        that enter non-smoothly or have several minima: a local search from the model without
+        the effect would stay in the nearest minimum."""
+        return []
 
     # --- diagnosis --------------------------------------------------------
     def evidence(self, context) -> Evidence:
@@ -189,6 +207,19 @@ class RudderDelay(Effect):
 
     def effective_rudder(self, time, rudder, p):
         return np.interp(time - p["tau"], time, rudder)
+
+    def starts(self, context):
+        """Profile the dead time over a grid (0.25 s to the 5 s bound): at each delay the model
+        without it is refitted by regression on the delayed rudder. A delay of a few seconds
+        otherwise hides in T2 and T3 (a lag looks like a slow second pole), and the search from
+        tau = 0 stays there."""
+        data = context.training
+        grid = [tau for tau in (0.25, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0) if tau >= 2 * data.sample_time]
+        out = []
+        for tau in grid:
+            delayed = replace(data, rudder=self.effective_rudder(data.time, data.rudder, {"tau": tau}))
+            out.append(dict(context.refit(delayed), tau=tau))
+        return out
 
     def evidence(self, context):
         c = _partial_corr(context.equation_residual, -context.signals.delta_dot,

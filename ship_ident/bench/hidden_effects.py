@@ -3,7 +3,8 @@
 Each case draws a vessel with ``simulator.random_vessel`` (quick USVs to slow ships), a
 manoeuvre, and hides one effect of the catalogue, none, or a pair, at a strength that matters
 (``strength``: e.g. a delay of 20-50 % of T1, a rudder moment 25-45 % short at 35 deg). A case
-is **fair** when an output-error fit of the true structure removes at least ``FAIR_SHARE`` of
+is **fair** when an output-error fit of the true structure (started, as a candidate, from the
+diagnosed model with the effects neutral and from the effects' own starts) removes at least ``FAIR_SHARE`` of
 the held-out free-run error (the diagnosis's own windows): only fair cases are counted.
 A fair case is **named first** when the top candidate is the hidden effect (one of the pair)
 and **fixed** when that candidate removes at least half of the held-out error (the larger of
@@ -14,9 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..diagnose import diagnose, free_run, _improvement
+from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run
 from ..effects import EFFECTS
-from ..estimators import make_estimator
 from ..simulator import random_vessel, simulate
 from ..structure import Structure
 from . import progress, register
@@ -74,7 +74,7 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
     row = {"seed": seed, "vessel": vessel.name, "manoeuvre": manoeuvre, "hidden": "+".join(hidden) or "none",
            "verdict": result.verdict, "top": top.effect, "top_improvement": top.improvement}
     if hidden:
-        true_fit = make_estimator("rlssvm+oe").fit(Structure("nomoto2", hidden), result.training)
+        true_fit = _fit(Structure("nomoto2", hidden), result.training, DEFAULT_METHOD, result.estimate.parameters)
         true_run = free_run(true_fit.structure, true_fit.parameters, result.held_out)
         row["true_improvement"] = max(
             _improvement(result.run.fit["rmse_heading"], true_run.fit["rmse_heading"]),

@@ -36,6 +36,7 @@ without it) and run free on the same held-out windows.
 from __future__ import annotations
 
 import os
+from copy import copy
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from multiprocessing import get_context
@@ -63,6 +64,10 @@ WORST_SEGMENTS = 5
 MIN_SPEED_VARIATION = 0.02     # speed std / mean below which speed dependence is not tried
 CORRELATION_LAG_S = 10.0       # s, largest lag of the residual correlation tests
 NOISE_MARGIN = 1.25            # held-out yaw-rate RMSE within this factor of the noise floor: no structure
+MUCH_WORSE = 0.25              # a candidate this much worse (heading or yaw rate) says why: extrapolation
+EXTRAPOLATION_MARGIN = 0.1     # held-out beyond the training's 1-99 % range by this share of it
+SPEED_SPAN = 1.25              # speed exponents are fitted only when the training's 95th/5th speed
+                               # percentiles differ by this factor; else K ~ U, T ~ 1/U (n_K = n_T = 1)
 PARSIMONY = 0.015              # ranking: each parameter of a candidate costs this share of improvement
                                # (course_instability holds cubic_yaw: at equal gain the simpler ranks first)
 VERDICTS = ("adequate", "missing_effect", "unexplained")
@@ -106,6 +111,7 @@ class Candidate:
     estimate: Estimate | None = None
     fit: dict | None = None
     note: str = ""
+    extrapolation: str | None = None   # why a much worse candidate fails on the held-out data
 
     def to_json(self) -> dict:
         return {"effect": self.effect, "improvement": self.improvement, "significant": self.significant,
@@ -115,7 +121,8 @@ class Candidate:
                 "improvement_yaw_rate": self.improvement_yaw_rate, "t_statistic": self.t_statistic,
                 "improves_most": self.signal, "evidence_score": self.evidence.score,
                 "parameters": None if self.estimate is None else
-                {k: float(v) for k, v in self.estimate.parameters.items()}, "note": self.note}
+                {k: float(v) for k, v in self.estimate.parameters.items()}, "note": self.note,
+                "extrapolation": self.extrapolation}
 
 
 @dataclass
@@ -436,7 +443,8 @@ def residual_follows(held_out: Dataset, residual: np.ndarray, ok: np.ndarray) ->
     features = {"the rudder": [held_out.rudder], "the rudder rate": [np.gradient(held_out.rudder, h)],
                 "the turn rate": [r], "the turn rate squared (with its sign)": [r * np.abs(r)],
                 "the heading": [np.cos(held_out.heading), np.sin(held_out.heading),
-                                np.cos(2 * held_out.heading), np.sin(2 * held_out.heading)],
+                                np.cos(2 * held_out.heading), np.sin(2 * held_out.heading)]
+                if np.ptp(held_out.heading) > np.pi else [held_out.heading],   # a narrow sector: one column
                 "the time since the start of each run (a drift)": [since_start]}
     if held_out.speed is not None:
         features["the speed"] = [held_out.speed]
@@ -506,6 +514,21 @@ def parameter_warnings(estimate: Estimate) -> list[dict]:
 
 
 # --- the diagnosis ---------------------------------------------------------------
+def physical_speed_law(structure: Structure, training: Dataset) -> Structure:
+    """``structure`` with speed_dependence's exponents held at the non-dimensional Nomoto form
+    (K ~ U, T ~ 1/U: n_K = n_T = 1) unless the training speed spans ``SPEED_SPAN`` (95th over 5th
+    percentile): exponents fitted on a narrow speed range extrapolate wildly to other speeds."""
+    if "speed_dependence" not in structure.effect_names or training.speed is None:
+        return structure
+    low, high = np.percentile(training.speed, [5, 95])
+    if low > 0 and high / low >= SPEED_SPAN:
+        return structure
+    held = copy(structure)
+    held.fixed_names = structure.fixed_names + ["n_K", "n_T"]
+    held.free_names = [n for n in structure.free_names if n not in ("n_K", "n_T")]
+    return held
+
+
 def _fit(structure: Structure, training: Dataset, method: str, nested: dict | None = None) -> Estimate:
     """Fit by ``method``. An iterative refinement (``+oe``, ``+pem``) also starts from ``nested``,
     the parameters of the model without its last effect, with that effect at its neutral value,
@@ -515,6 +538,7 @@ def _fit(structure: Structure, training: Dataset, method: str, nested: dict | No
     (On KVLCC2 the regression start of nomoto1 + cubic_yaw is course-unstable, T < 0, and the
     search from its clipped values ends in a local minimum whose fit residual is 60 times nomoto1's.)"""
     estimator = make_estimator(method)
+    structure = physical_speed_law(structure, training)
     if nested is None or not isinstance(estimator, OutputError):
         return estimator.fit(structure, training)
     start = dict(nested)
@@ -568,8 +592,36 @@ def _improvement(before: float, after: float) -> float:
     return float(1.0 - after / before) if before > 0 and np.isfinite(after) else -np.inf
 
 
-def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, refit: Estimate | str) -> Candidate:
-    """A candidate's held-out improvement and its significance against the base model's free runs."""
+def extrapolation(training: Dataset, held_out: Dataset) -> str | None:
+    """Why the held-out data lie outside what the fit saw: speed, turn rate or rudder beyond the
+    training range (by more than ``EXTRAPOLATION_MARGIN`` of it), or headings the training never
+    sailed (45 deg sectors); None when they lie within."""
+    out = []
+    for label, unit, scale, get in (
+            ("speed", "m/s", 1.0, lambda d: d.speed),
+            ("turn rate |r|", "deg/s", np.degrees(1.0), lambda d: np.abs(d.yaw_rate)),
+            ("rudder |delta|", "deg", np.degrees(1.0), lambda d: np.abs(d.rudder))):
+        train, held = get(training), get(held_out)
+        if train is None or held is None:
+            continue
+        lo, hi = np.percentile(train, [1, 99])
+        margin = EXTRAPOLATION_MARGIN * max(hi - lo, 1e-9)
+        h_lo, h_hi = np.percentile(held, [1, 99])
+        if h_hi > hi + margin or (label == "speed" and h_lo < lo - margin):
+            out.append(f"held-out {label} {h_lo * scale:.3g}-{h_hi * scale:.3g} {unit} against "
+                       f"{lo * scale:.3g}-{hi * scale:.3g} {unit} in training")
+    sector = (lambda d: set((np.mod(np.degrees(d.heading) + 22.5, 360) // 45).astype(int)))
+    unseen = sector(held_out) - sector(training)
+    if unseen:
+        out.append(f"held-out headings in {len(unseen)} of 8 sectors the training never sailed "
+                   f"({', '.join(SECTORS[k] for k in sorted(unseen))})")
+    return "; ".join(out) or None
+
+
+def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, refit: Estimate | str,
+          training: Dataset | None = None) -> Candidate:
+    """A candidate's held-out improvement and its significance against the base model's free runs;
+    a candidate much worse on the held-out data says why (``extrapolation``) when ``training`` is given."""
     if isinstance(refit, str):
         return Candidate(effect, 0.0, False, base.fit["rmse_heading"], base.fit["rmse_yaw_rate"], evidence,
                          note=f"not fitted: {refit}")
@@ -579,10 +631,12 @@ def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, ref
     t = loss_t_statistic(base.yaw_rate - held_out.yaw_rate, run.yaw_rate - held_out.yaw_rate)
     improvement = max(imp_h, imp_r)
     significant = bool(imp_r >= MIN_IMPROVEMENT and t >= SIGNIFICANCE_T)
+    worse = training is not None and min(imp_h, imp_r) < -MUCH_WORSE
     return Candidate(effect, float(improvement if np.isfinite(improvement) else -1.0), significant,
                      run.fit["rmse_heading"], run.fit["rmse_yaw_rate"], evidence,
                      improvement_heading=imp_h, improvement_yaw_rate=imp_r, t_statistic=t,
-                     signal="heading" if imp_h >= imp_r else "yaw_rate", estimate=refit, fit=run.fit)
+                     signal="heading" if imp_h >= imp_r else "yaw_rate", estimate=refit, fit=run.fit,
+                     extrapolation=extrapolation(training, held_out) if worse else None)
 
 
 def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str = DEFAULT_METHOD,
@@ -646,7 +700,7 @@ def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str =
         context = residual_context(structure, estimate.parameters, dataset)
         evidences = {name: EFFECTS[name].evidence(context) for name in names}
     candidates = [judge(n, evidences[n], held_out, run,
-                        refits.get(n, "the speed hardly varies in these data")) for n in names]
+                        refits.get(n, "the speed hardly varies in these data"), training) for n in names]
     candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
     say("locating the worst segments and testing the residual")
     tc = time_constant(estimate.parameters)

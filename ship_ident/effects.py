@@ -302,8 +302,9 @@ class SpeedDependence(Effect):
     parameters = (
         Parameter("U_ref", "m/s", "reference speed at which K and T hold (fixed: median speed)",
                   1.0, 0.0, np.inf),
-        Parameter("n_K", "-", "exponent of K in U/U_ref (1: K ~ U)", 1.0, -3.0, 4.0),
-        Parameter("n_T", "-", "exponent of the time constants in U_ref/U (1: T ~ 1/U)", 1.0, -3.0, 4.0),
+        Parameter("n_K", "-", "exponent of K in U/U_ref (1: K ~ U, the non-dimensional Nomoto form)",
+                  1.0, 0.0, 2.0),
+        Parameter("n_T", "-", "exponent of the time constants in U_ref/U (1: T ~ 1/U)", 1.0, 0.0, 2.0),
     )
     fixed = ("U_ref",)
 
@@ -321,6 +322,10 @@ class SpeedDependence(Effect):
 
     def from_coefficients(self, coefficients, base):
         return {"n_K": 1.0, "n_T": 1.0}
+
+    def starts(self, context):
+        """The non-dimensional Nomoto form, K ~ U and T ~ 1/U, from the model without the effect."""
+        return [dict(context.nested, n_K=1.0, n_T=1.0)]
 
     def evidence(self, context):
         if context.signals.speed is None or np.std(context.signals.speed) < 1e-6:

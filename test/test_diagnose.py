@@ -1,5 +1,6 @@
 """Diagnosis on simulated data with known truth: the hidden effect is found, and adding it helps."""
 import json
+from dataclasses import replace
 import re
 from pathlib import Path
 
@@ -7,9 +8,10 @@ import numpy as np
 import pytest
 
 from ship_ident import cli
-from ship_ident.diagnose import diagnose, join_recordings
+from ship_ident.diagnose import _fit, diagnose, extrapolation, join_recordings
 from ship_ident.effects import EFFECTS
 from ship_ident.simulator import simulate
+from ship_ident.structure import Structure
 
 ROOT = Path(__file__).resolve().parents[1]
 KVLCC2 = ROOT.parent / "shared" / "data" / "kvlcc2_marin"
@@ -164,3 +166,28 @@ def test_joined_recordings_stay_apart():
     assert joined.segments == ((0, n), (n, n + other.n_samples))
     assert np.all(np.diff(joined.time) > 0) and len(joined.gaps) == 1
     assert np.array_equal(joined.heading[n:], other.heading) and np.array_equal(joined.rudder[:n], first.rudder)
+
+
+def test_speed_exponents_follow_the_physics_on_a_narrow_speed_range():
+    """K ~ U and T ~ 1/U held (n_K = n_T = 1) when the training speed hardly varies; fitted, within
+    their bounds [0, 2], when it spans 60-120 % of the nominal speed."""
+    from ship_ident.diagnose import physical_speed_law
+    structure = Structure("nomoto2", ("speed_dependence",))
+    varying = simulate("random", "seed001", effects=("speed_dependence",), duration=DURATION, seed=4).dataset
+    steady = replace(varying, speed=np.full(varying.n_samples, 2.0) + 0.01 * np.sin(varying.time))
+    assert {"n_K", "n_T"} <= set(physical_speed_law(structure, varying).free_names)
+    held = physical_speed_law(structure, steady)
+    assert "n_K" in held.fixed_names and "n_T" not in held.free_names
+    assert "n_K" in structure.free_names                       # the caller's structure is untouched
+    estimate = _fit(structure, steady, "rlssvm+oe", {"K": 0.5, "T1": 1.4, "T2": 0.1, "T3": 0.05})
+    assert estimate.parameters["n_K"] == 1.0 and estimate.parameters["n_T"] == 1.0
+
+
+def test_extrapolation_names_what_the_fit_never_saw():
+    """Held-out turn rates and rudder beyond the training's (a 35 deg turning circle after a 10 deg
+    zigzag) are named; the same manoeuvre held out names nothing."""
+    zigzag = simulate("zigzag10", "seed001", duration=200.0, seed=1).dataset
+    turning = simulate("turning", "seed001", duration=200.0, seed=2, amplitude=35.0).dataset
+    sentence = extrapolation(zigzag, turning)
+    assert "turn rate" in sentence and "rudder" in sentence
+    assert extrapolation(zigzag, zigzag) is None

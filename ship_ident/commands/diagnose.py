@@ -101,6 +101,8 @@ def format_diagnosis(result, source, options: str = "") -> str:
                      f"{'significant' if c.significant else 'not significant'} (t {c.t_statistic:.1f})"
                      f"{'; ' + c.note if c.note else ''}")
         lines.append(f"      {c.evidence.sentence}")
+        if c.extrapolation:
+            lines.append(f"      much worse held out: {c.extrapolation}")
     if result.verdict == "missing_effect":
         top = result.candidates[0].effect
         effects = ",".join(result.structure.effect_names + (top,))

@@ -68,7 +68,7 @@ MUCH_WORSE = 0.25              # a candidate this much worse (heading or yaw rat
 EXTRAPOLATION_MARGIN = 0.1     # held-out beyond the training's 1-99 % range by this share of it
 SPEED_SPAN = 1.25              # speed exponents are fitted only when the training's 95th/5th speed
                                # percentiles differ by this factor; else K ~ U, T ~ 1/U (n_K = n_T = 1)
-PARSIMONY = 0.015              # ranking: each parameter of a candidate costs this share of improvement
+PARSIMONY = 0.005              # ranking: each parameter of a candidate costs this share of improvement
                                # (course_instability holds cubic_yaw: at equal gain the simpler ranks first)
 VERDICTS = ("adequate", "missing_effect", "unexplained")
 # the effect that frees a parameter pinned at a physical bound

@@ -191,3 +191,24 @@ def test_extrapolation_names_what_the_fit_never_saw():
     sentence = extrapolation(zigzag, turning)
     assert "turn rate" in sentence and "rudder" in sentence
     assert extrapolation(zigzag, zigzag) is None
+
+
+R0 = 0.5883 * np.radians(20.0)   # seed001's turn rate at 20 deg of rudder (rad/s)
+NEW_EFFECTS = {"course_instability": {"n1": -0.3, "n3": 0.3 / (0.4 * R0) ** 2},   # holds a turn at 0.4 R0
+               "quadratic_yaw": {"d_q": 0.8 / R0}, "rudder_stall": {"c_stall": 0.8}}
+
+
+@pytest.mark.parametrize("effect", NEW_EFFECTS)
+def test_effects_real_hulls_need_are_named_first_with_their_parameters(effect):
+    """Course instability (n1 < 0), r|r| damping and rudder stall hidden on seed001: named first,
+    fitted within 30 % of the truth (n1 trades against K and T1), most of the held-out error
+    removed (the larger of heading and yaw rate, as the ranking)."""
+    truth = NEW_EFFECTS[effect]
+    result = diagnose(_data((effect,), truth), "nomoto2", (), workers=1)
+    top = result.candidates[0]
+    print(effect, [(c.effect, round(c.improvement_yaw_rate, 2), c.significant) for c in result.candidates[:3]],
+          top.estimate.parameters)
+    assert top.effect == effect and top.improvement > 0.5
+    name = next(iter(truth))
+    assert top.estimate.parameters[name] == pytest.approx(truth[name], rel=0.3)
+    assert result.verdict != "adequate"

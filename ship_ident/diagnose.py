@@ -64,6 +64,9 @@ WORST_SEGMENTS = 5
 MIN_SPEED_VARIATION = 0.02     # speed std / mean below which speed dependence is not tried
 CORRELATION_LAG_S = 10.0       # s, largest lag of the residual correlation tests
 NOISE_MARGIN = 1.25            # held-out yaw-rate RMSE within this factor of the noise floor: no structure
+MIN_TRAINING_GAIN = 0.02       # a significant candidate also fits the training data this much better (fit
+                               # residual): a poorly excited slow ship's base model scatters on held-out
+                               # data, and a candidate that only moves along that scatter is no effect
 MUCH_WORSE = 0.25              # a candidate this much worse (heading or yaw rate) says why: extrapolation
 EXTRAPOLATION_MARGIN = 0.1     # held-out beyond the training's 1-99 % range by this share of it
 SPEED_SPAN = 1.25              # speed exponents are fitted only when the training's 95th/5th speed
@@ -112,6 +115,7 @@ class Candidate:
     fit: dict | None = None
     note: str = ""
     extrapolation: str | None = None   # why a much worse candidate fails on the held-out data
+    training_gain: float = 0.0         # share of the base model's training fit residual it removes
 
     def to_json(self) -> dict:
         return {"effect": self.effect, "improvement": self.improvement, "significant": self.significant,
@@ -122,7 +126,7 @@ class Candidate:
                 "improves_most": self.signal, "evidence_score": self.evidence.score,
                 "parameters": None if self.estimate is None else
                 {k: float(v) for k, v in self.estimate.parameters.items()}, "note": self.note,
-                "extrapolation": self.extrapolation}
+                "extrapolation": self.extrapolation, "training_gain": self.training_gain}
 
 
 @dataclass
@@ -619,8 +623,9 @@ def extrapolation(training: Dataset, held_out: Dataset) -> str | None:
 
 
 def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, refit: Estimate | str,
-          training: Dataset | None = None) -> Candidate:
-    """A candidate's held-out improvement and its significance against the base model's free runs;
+          training: Dataset | None = None, base_cost: float | None = None) -> Candidate:
+    """A candidate's held-out improvement and its significance against the base model's free runs
+    (and, given the base's training fit residual ``base_cost``, against its fit of the training data);
     a candidate much worse on the held-out data says why (``extrapolation``) when ``training`` is given."""
     if isinstance(refit, str):
         return Candidate(effect, 0.0, False, base.fit["rmse_heading"], base.fit["rmse_yaw_rate"], evidence,
@@ -630,13 +635,16 @@ def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, ref
     imp_r = _improvement(base.fit["rmse_yaw_rate"], run.fit["rmse_yaw_rate"])
     t = loss_t_statistic(base.yaw_rate - held_out.yaw_rate, run.yaw_rate - held_out.yaw_rate)
     improvement = max(imp_h, imp_r)
-    significant = bool(imp_r >= MIN_IMPROVEMENT and t >= SIGNIFICANCE_T)
+    training_gain = (1.0 - refit.info["cost_ratio"] / base_cost
+                     if base_cost and "cost_ratio" in refit.info else 1.0)
+    significant = bool(imp_r >= MIN_IMPROVEMENT and t >= SIGNIFICANCE_T and training_gain >= MIN_TRAINING_GAIN)
     worse = training is not None and min(imp_h, imp_r) < -MUCH_WORSE
     return Candidate(effect, float(improvement if np.isfinite(improvement) else -1.0), significant,
                      run.fit["rmse_heading"], run.fit["rmse_yaw_rate"], evidence,
                      improvement_heading=imp_h, improvement_yaw_rate=imp_r, t_statistic=t,
                      signal="heading" if imp_h >= imp_r else "yaw_rate", estimate=refit, fit=run.fit,
-                     extrapolation=extrapolation(training, held_out) if worse else None)
+                     extrapolation=extrapolation(training, held_out) if worse else None,
+                     training_gain=float(training_gain))
 
 
 def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str = DEFAULT_METHOD,
@@ -700,7 +708,8 @@ def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str =
         context = residual_context(structure, estimate.parameters, dataset)
         evidences = {name: EFFECTS[name].evidence(context) for name in names}
     candidates = [judge(n, evidences[n], held_out, run,
-                        refits.get(n, "the speed hardly varies in these data"), training) for n in names]
+                        refits.get(n, "the speed hardly varies in these data"), training,
+                        estimate.info.get("cost_ratio")) for n in names]
     candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
     say("locating the worst segments and testing the residual")
     tc = time_constant(estimate.parameters)

@@ -215,7 +215,8 @@ def write_report(d: Diagnosis, directory, source: str = "") -> Path:
     candidates = _table(["effect", "improvement", "heading", "yaw rate", "t", "significant", "evidence"], [
         [c.effect, f"{100 * c.improvement:.1f} %", f"{c.rmse_heading_after * DEG:.3g} deg",
          f"{c.rmse_yaw_rate_after * DEG:.3g} deg/s", f"{c.t_statistic:.1f}", "yes" if c.significant else "no",
-         c.evidence.sentence + (f" ({c.note})" if c.note else "")] for c in d.candidates])
+         c.evidence.sentence + (f" ({c.note})" if c.note else "")
+         + (f"; much worse held out: {c.extrapolation}" if c.extrapolation else "")] for c in d.candidates])
     worst = _table(["recording", "time (s)", "heading RMSE (deg)", "yaw-rate RMSE (deg/s)", "turning", "|r| (deg/s)",
                     "heading", "rudder std (deg)", "speed (m/s)"], [
         [s.get("recording", "") + (" (held out)" if s.get("held_out") and "held out" not in
@@ -240,7 +241,7 @@ td,th{{border:1px solid #ccc;padding:2px 6px}} img{{max-width:100%}}</style></he
 <p>Data: {html.escape(source)}. Fitted on {covered(d.training):.0f} s, run free on {covered(d.held_out):.0f} s
 held out ({len(d.held_out.segments)} free runs, each from the measured heading and yaw rate).
 All figures are free-run figures. Yaw-rate noise floor {d.noise['yaw_rate'] * DEG:.3g} deg/s.</p>
-<p><b>Verdict: {d.verdict}</b></p>
+<p><b>Verdict: {d.verdict}</b>: {html.escape(d.verdict_sentence)}</p>
 <h2>Held-out free-run measures</h2>{measures}
 <h2>Candidate effects (best first)</h2>{candidates}
 <h2>Worst segments</h2>{worst}

@@ -64,9 +64,9 @@ WORST_SEGMENTS = 5
 MIN_SPEED_VARIATION = 0.02     # speed std / mean below which speed dependence is not tried
 CORRELATION_LAG_S = 10.0       # s, largest lag of the residual correlation tests
 NOISE_MARGIN = 1.25            # held-out yaw-rate RMSE within this factor of the noise floor: no structure
-MIN_TRAINING_GAIN = 0.02       # a significant candidate also fits the training data this much better (fit
-                               # residual): a poorly excited slow ship's base model scatters on held-out
-                               # data, and a candidate that only moves along that scatter is no effect
+MIN_TRAINING_GAIN = 0.02       # a significant candidate also removes this share of the yaw-rate error of free
+                               # runs on the training data: a poorly excited slow ship's model scatters
+                               # on held-out data, and a candidate that only moves along it is no effect
 MUCH_WORSE = 0.25              # a candidate this much worse (heading or yaw rate) says why: extrapolation
 EXTRAPOLATION_MARGIN = 0.1     # held-out beyond the training's 1-99 % range by this share of it
 SPEED_SPAN = 1.25              # speed exponents are fitted only when the training's 95th/5th speed
@@ -115,7 +115,7 @@ class Candidate:
     fit: dict | None = None
     note: str = ""
     extrapolation: str | None = None   # why a much worse candidate fails on the held-out data
-    training_gain: float = 0.0         # share of the base model's training fit residual it removes
+    training_gain: float = 0.0         # share of the training free-run yaw-rate error it removes
 
     def to_json(self) -> dict:
         return {"effect": self.effect, "improvement": self.improvement, "significant": self.significant,
@@ -623,10 +623,11 @@ def extrapolation(training: Dataset, held_out: Dataset) -> str | None:
 
 
 def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, refit: Estimate | str,
-          training: Dataset | None = None, base_cost: float | None = None) -> Candidate:
-    """A candidate's held-out improvement and its significance against the base model's free runs
-    (and, given the base's training fit residual ``base_cost``, against its fit of the training data);
-    a candidate much worse on the held-out data says why (``extrapolation``) when ``training`` is given."""
+          training: Dataset | None = None, base_training: FreeRun | None = None) -> Candidate:
+    """A candidate's held-out improvement and its significance against the base model's free runs;
+    given ``training`` (cut into free-run windows) and the base model's free runs on it
+    (``base_training``), also its gain on the training data, and why (``extrapolation``) it is much
+    worse on the held-out data."""
     if isinstance(refit, str):
         return Candidate(effect, 0.0, False, base.fit["rmse_heading"], base.fit["rmse_yaw_rate"], evidence,
                          note=f"not fitted: {refit}")
@@ -635,8 +636,10 @@ def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, ref
     imp_r = _improvement(base.fit["rmse_yaw_rate"], run.fit["rmse_yaw_rate"])
     t = loss_t_statistic(base.yaw_rate - held_out.yaw_rate, run.yaw_rate - held_out.yaw_rate)
     improvement = max(imp_h, imp_r)
-    training_gain = (1.0 - refit.info["cost_ratio"] / base_cost
-                     if base_cost and "cost_ratio" in refit.info else 1.0)
+    training_gain = 1.0
+    if training is not None and base_training is not None:
+        fitted = free_run(refit.structure, refit.parameters, training)
+        training_gain = _improvement(base_training.fit["rmse_yaw_rate"], fitted.fit["rmse_yaw_rate"])
     significant = bool(imp_r >= MIN_IMPROVEMENT and t >= SIGNIFICANCE_T and training_gain >= MIN_TRAINING_GAIN)
     worse = training is not None and min(imp_h, imp_r) < -MUCH_WORSE
     return Candidate(effect, float(improvement if np.isfinite(improvement) else -1.0), significant,
@@ -707,9 +710,17 @@ def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str =
         run = free_run(structure, estimate.parameters, held_out)
         context = residual_context(structure, estimate.parameters, dataset)
         evidences = {name: EFFECTS[name].evidence(context) for name in names}
+    fitted_windows = windows(training, window)
+    fitted_run = free_run(structure, estimate.parameters, fitted_windows)
     candidates = [judge(n, evidences[n], held_out, run,
-                        refits.get(n, "the speed hardly varies in these data"), training,
-                        estimate.info.get("cost_ratio")) for n in names]
+                        refits.get(n, "the speed hardly varies in these data"), fitted_windows, fitted_run)
+                  for n in names]
+    if "low_excitation" in estimate.flags:   # the model itself is poorly determined: no gain is an effect
+        for c in candidates:
+            if c.significant:
+                c.significant = False
+                c.note = ("would be significant, but the training data excite the yaw too little "
+                          "(low_excitation) to tell an effect from the model's own scatter")
     candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
     say("locating the worst segments and testing the residual")
     tc = time_constant(estimate.parameters)

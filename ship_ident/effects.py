@@ -339,6 +339,9 @@ class SpeedDependence(Effect):
                         feature, "rudder x speed change (deg m/s)", np.degrees(1.0))
 
 
+T_UPPER_BOUND = 1e3   # s, the base models' upper bound on T and T1 (structure.BASE_MODELS)
+
+
 class CourseInstability(Effect):
     name = "course_instability"
     explanation = ("the ship does not hold a straight course by itself: left alone it turns one way "
@@ -371,7 +374,7 @@ class CourseInstability(Effect):
     def evidence(self, context):
         s = context.signals
         c = _partial_corr(context.equation_residual, s.r, [s.delta])
-        pinned = max(context.parameters.get("T", 0.0), context.parameters.get("T1", 0.0)) >= 999.0
+        pinned = max(context.parameters.get("T", 0.0), context.parameters.get("T1", 0.0)) >= 0.999 * T_UPPER_BOUND
         note = "; the time constant sits on its upper bound, which is what course instability looks like" \
             if pinned else ""
         return Evidence((abs(c) + (1.0 if pinned else 0.0)) * np.sqrt(context.effective_samples),

@@ -36,8 +36,9 @@ def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
     top = result.candidates[0]
     figures = {c.effect: (round(c.improvement_heading, 2), round(c.improvement_yaw_rate, 2), c.significant)
                for c in result.candidates}
-    print(effect, figures)
+    print(effect, figures, [round(c.training_gain, 4) for c in result.candidates])
     assert result.verdict == "missing_effect", figures
+    assert top.training_gain >= 0.02   # it also shows in free runs on the data it was fitted on
     assert top.effect == effect and top.significant, figures
     key = "improvement_yaw_rate" if effect == "gyro_bias" else "improvement_heading"
     assert getattr(top, key) >= 0.5, figures

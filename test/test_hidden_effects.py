@@ -22,8 +22,9 @@ def test_hidden_effect_is_named_first_and_fixed(seed, hidden):
 
 @pytest.mark.slow
 def test_nothing_hidden_on_a_slow_ship_is_not_a_missing_effect():
-    """A slow ship's first fit stops in a local minimum (T1 = T2 = 3.3 s against 20.6 s, a fit
-    residual 4.7 noise levels); the candidates' starts refit it, and no candidate is credited."""
+    """A slow ship on a 10/10 zigzag: its first fit stops in a local minimum (T1 = T2 = 3.3 s against
+    20.6 s, a fit residual 12 noise levels), the candidates' starts refit it to the noise, and on
+    data this poorly excited (low_excitation) no candidate's held-out gain is credited."""
     row = run_case(1251001414, ())
     print(row)
     assert row["verdict"] != "missing_effect"

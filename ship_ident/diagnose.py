@@ -73,7 +73,6 @@ SPEED_SPAN = 1.25              # speed exponents are fitted only when the traini
                                # percentiles differ by this factor; else K ~ U, T ~ 1/U (n_K = n_T = 1)
 PARSIMONY = 0.005              # ranking: each parameter of a candidate costs this share of improvement
                                # (course_instability holds cubic_yaw: at equal gain the simpler ranks first)
-VERDICTS = ("adequate", "missing_effect", "unexplained")
 # the effect that frees a parameter pinned at a physical bound
 FREED_BY = {("T", "upper"): "course_instability", ("T1", "upper"): "course_instability",
             ("T3", "lower"): "rudder_delay", ("T2", "lower"): "quadratic_yaw or rudder_stall",
@@ -194,6 +193,8 @@ class Diagnosis:
                          f"the noise floor) and follows {tests['follows']}")
         for w in self.pinned:
             parts.append(w["message"])
+        if "low_excitation" in self.estimate.flags:
+            parts.append("the training data excite the yaw too little (low_excitation) to credit any effect")
         best = self.candidates[0] if self.candidates else None
         tail = (f"; no catalogued effect removes it (best: {best.effect}, "
                 f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant)"

@@ -18,10 +18,10 @@ $(STAMP): setup.py package.xml
 	touch $(STAMP)
 
 test: $(STAMP)
-	$(PY) -m pytest -n 2 -q test
+	$(PY) -m pytest -n 2 -q -rs test
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -n 2 -q -m "not slow" test
+	$(PY) -m pytest -n 2 -q -rs -m "not slow" test
 
 demo: $(STAMP)
 	$(PY) -m ship_ident.demo

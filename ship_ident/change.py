@@ -15,9 +15,17 @@ a reference. At each refit the newest block is run with the newest
 model fitted before the block began (out of sample: a model fitted on the
 block itself has already bent towards a new response) and compared with
 that model's level: above ``ratio`` times it on ``CONFIRMATIONS`` refits in
-a row, the vessel has changed. Where it changed is found in the newest
+a row, the vessel has changed. A large change shows sooner: the newest
+``short`` s (one refit period), run with the model of the refit before them,
+above SHORT_RATIO_FACTOR ``ratio`` times the level declare it at once. Where it changed is found in the newest
 2 ``length`` s of that free run: the split of greatest likelihood for a step
 in the error's variance; the window then restarts there.
+
+Right after a change the new data are too short to determine every time
+constant, but a free run is almost linear in the gain: ``fit_gain`` refits
+K (and the main time constant when they determine it) on them with
+everything else held from the last good model (a steady turn with the
+rudder held gives K = r / delta alone).
 """
 from __future__ import annotations
 
@@ -28,21 +36,33 @@ from dataclasses import replace
 import numpy as np
 
 from .dataset import Dataset
+from .metrics import effective_sample_fraction
 from .signals import noise_level
 from .structure import Structure
 
 CONFIRMATIONS = 2                 # refits in a row above the ratio before a change is declared
+SHORT_RATIO_FACTOR = 4.0          # the newest refit period's error must exceed this many times the ratio
+MIN_SHORT_SAMPLES = 20            # the short test needs at least this many samples
 MEDIAN_OF_CHI2_1 = 0.4549         # median of e^2 / sigma^2 for Gaussian e
+UPPER_QUARTILE_OF_CHI2_1 = 1.3233  # its 75th percentile (a change in the last half of the short
+                                   # test's samples shows there, spikes in a quarter do not)
 MIN_LEVEL = math.radians(0.01) ** 2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
 # A reference model must be well determined: relative standard errors at most these (a window of
 # steady turning gives a K to 10-25 % and T1 to 60-400 %, and any new rudder motion surprises it).
 REFERENCE_RELATIVE_ERRORS = {"K": 0.05, "T": 0.2, "T1": 0.2}
 
 
-def _blocks(dataset: Dataset, n: int, offset: int = 0) -> tuple:
+def whole_blocks(dataset: Dataset, n: int, offset: int = 0) -> tuple:
     """Half-open index ranges of whole blocks of n samples inside the dataset's segments."""
     return tuple((a, a + n) for start, stop in dataset.segments
                  for a in range(start + offset, stop - n + 1, n))
+
+
+def covering_blocks(dataset: Dataset, n: int) -> tuple:
+    """Half-open index ranges of blocks of n samples covering the dataset's segments (each
+    segment's last block may be shorter; blocks of one sample are left out)."""
+    return tuple((a, min(a + n, stop)) for start, stop in dataset.segments
+                 for a in range(start, stop, n) if min(a + n, stop) - a >= 2)
 
 
 def block_errors(structure: Structure, params: dict, dataset: Dataset, blocks: tuple) -> np.ndarray:
@@ -60,11 +80,13 @@ class ChangeDetector:
     fitted before them, exceed ``ratio`` times that model's usual level on CONFIRMATIONS
     refits in a row (see the module docstring)."""
 
-    def __init__(self, ratio: float, length: float):
+    def __init__(self, ratio: float, length: float, short: float):
         self.ratio = ratio      # mean-square ratio (dimensionless); 0: never
         self.length = length    # s
+        self.short = short      # s, the newest data of the quick test (one refit period)
         self.references = deque()  # (window end s, parameters, usual level (rad/s)^2), oldest first
         self.votes = 0
+        self.short_votes = 0
 
     def calibrate(self, structure: Structure, estimate, dataset: Dataset) -> None:
         """Learn the usual error level of a just-accepted estimate on its own (full) window; an
@@ -74,7 +96,7 @@ class ChangeDetector:
                    for name, limit in REFERENCE_RELATIVE_ERRORS.items() if name in params):
             return
         n = int(round(self.length / dataset.sample_time))
-        blocks = _blocks(dataset, n) + _blocks(dataset, n, n // 2)
+        blocks = whole_blocks(dataset, n) + whole_blocks(dataset, n, n // 2)
         errors = block_errors(structure, params, dataset, blocks)
         if len(errors):
             floor = max(noise_level(dataset.yaw_rate, 0.0) ** 2, MIN_LEVEL)
@@ -82,33 +104,94 @@ class ChangeDetector:
 
     def forget(self) -> None:
         self.references.clear()
-        self.votes = 0
+        self.votes = self.short_votes = 0
 
-    def _reference(self, before: float):
-        """The newest reference fitted on data ending at or before ``before`` (s), or None."""
-        while len(self.references) > 1 and self.references[1][0] <= before:
+    def _reference(self, before: float, drop: bool = True):
+        """The newest reference fitted on data ending at or before ``before`` (s), or None; older
+        ones are dropped unless ``drop`` is False."""
+        while len(self.references) > 1 and self.references[1][0] <= before and drop:
             self.references.popleft()
-        return self.references[0] if self.references and self.references[0][0] <= before else None
+        fitted = [ref for ref in self.references if ref[0] <= before]
+        return fitted[-1] if fitted else None
+
+    def _short_ratio(self, structure: Structure, dataset: Dataset) -> float:
+        """Error of the newest ``short`` s (robust mean square from the median or, when larger, the
+        upper quartile of e^2, as for Gaussian errors), run
+        with the newest reference fitted before them, over that reference's usual level (NaN without one). The run starts ``length``
+        s back, so that its unknown initial yaw acceleration has died out by then."""
+        m = max(int(round(self.short / dataset.sample_time)), MIN_SHORT_SAMPLES)
+        start, stop = dataset.segments[-1]
+        reference = self._reference(float(dataset.time[stop - m]), drop=False) if stop - start >= m else None
+        if reference is None:
+            return math.nan
+        a = max(start, stop - max(int(round(self.length / dataset.sample_time)), m))
+        _, r = structure.simulate(reference[1], dataset.slice(a, stop))
+        squared = (r[-m:] - dataset.yaw_rate[stop - m:stop]) ** 2
+        robust = max(np.median(squared) / MEDIAN_OF_CHI2_1, np.percentile(squared, 75) / UPPER_QUARTILE_OF_CHI2_1)
+        return float(robust) / reference[2]
 
     def test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
         """(ratio of the newest block's error to the usual level, time (s) the vessel changed or None).
         The newest block is out of sample: the model is the newest one fitted before it began."""
+        if not self.ratio:
+            return math.nan, None
+        short = self._short_ratio(structure, dataset)
+        self.short_votes = CONFIRMATIONS if short > SHORT_RATIO_FACTOR * self.ratio else 0
         n = int(round(self.length / dataset.sample_time))
         start, stop = dataset.segments[-1]
         reference = self._reference(float(dataset.time[stop - n])) if stop - start >= n else None
-        if not self.ratio or reference is None:
-            return math.nan, None
-        _, params, level = reference
-        newest = block_errors(structure, params, dataset, ((stop - n, stop),))
-        ratio = float(newest[0]) / level
-        self.votes = self.votes + 1 if ratio > self.ratio else 0
-        if self.votes < CONFIRMATIONS:
+        if reference is None and self.short_votes < CONFIRMATIONS:
+            return short, None
+        if reference is None:  # the short test alone: the location uses the newest model before it
+            reference = self._reference(float(dataset.time[stop - 1]), drop=False)
+            ratio = short
+        else:
+            ratio = float(block_errors(structure, reference[1], dataset, ((stop - n, stop),))[0]) / reference[2]
+            self.votes = self.votes + 1 if ratio > self.ratio else 0
+        if self.votes < CONFIRMATIONS and self.short_votes < CONFIRMATIONS:
             return ratio, None
+        if self.short_votes >= CONFIRMATIONS:
+            ratio = max(ratio, short)
+        _, params, level = reference
         self.forget()
         a = max(start, stop - 2 * n)
         _, r = structure.simulate(params, dataset.slice(a, stop))
         squared = np.minimum((r - dataset.yaw_rate[a:stop]) ** 2, 100 * self.ratio * level)
         return ratio, float(dataset.time[a + variance_change_point(squared)])
+
+
+def fit_gain(structure: Structure, params: dict, dataset: Dataset, blocks: tuple, names=("K",),
+             iterations: int = 8) -> tuple[dict, dict]:
+    """The parameters ``names`` (those the structure has; by default the gain K, 1/s) fitted by Gauss-Newton to the yaw rate of ``dataset``, run free from the measured state
+    at the start of each of ``blocks``, with every other parameter held at ``params``; returns the
+    parameters and the standard errors of the fitted ones (residual variance, autocorrelation
+    allowed for)."""
+    names = [n for n in names if n in params]
+    dataset = replace(dataset, segments=blocks)
+    lower, upper = structure.bounds(names)
+    x = np.array([params[n] for n in names], dtype=float)
+    for _ in range(iterations):
+        steps = 1e-6 * np.maximum(np.abs(x), 1e-2)
+        points = [x] + [x + step * unit for step, unit in zip(steps, np.eye(len(x)))]
+        _, r = structure.simulate_runs([dict(params, **dict(zip(names, p))) for p in points], dataset)
+        error = r[0] - dataset.yaw_rate
+        jacobian = ((r[1:] - r[0]) / steps[:, None]).T
+        if not (np.all(np.isfinite(error)) and np.all(np.isfinite(jacobian))):
+            break
+        step = np.linalg.lstsq(jacobian, -error, rcond=None)[0]
+        x = np.clip(x + step, lower, upper)
+        if np.all(np.abs(step) <= 1e-6 * np.maximum(np.abs(x), 1e-3)):
+            break
+    fitted = dict(params, **dict(zip(names, x)))
+    _, r = structure.simulate(fitted, dataset)
+    error = r - dataset.yaw_rate
+    variance = float(error @ error) / max(len(error) - len(names), 1) / effective_sample_fraction(error)
+    try:
+        covariance = variance * np.linalg.inv(jacobian.T @ jacobian)
+        std = np.sqrt(np.clip(np.diag(covariance), 0, None))
+    except np.linalg.LinAlgError:
+        std = np.full(len(names), np.inf)
+    return fitted, {n: float(s) for n, s in zip(names, std)}
 
 
 def variance_change_point(squared: np.ndarray, margin: int = 10) -> int:

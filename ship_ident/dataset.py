@@ -62,11 +62,17 @@ class Dataset:
         return float(self.time[-1] - self.time[0]) if self.n_samples else 0.0
 
     def slice(self, start: int, stop: int) -> "Dataset":
-        """The samples ``[start, stop)`` as a new Dataset, segments clipped."""
+        """The samples ``[start, stop)`` as a new Dataset, segments and the recordings' sample
+        ranges (``meta["recordings"]``) clipped."""
         segs = tuple((max(a, start) - start, min(b, stop) - start)
                      for a, b in self.segments if min(b, stop) > max(a, start))
+        meta = self.meta
+        if "recordings" in meta:
+            meta = dict(meta, recordings=[
+                dict(r, start=max(r["start"], start) - start, stop=min(r["stop"], stop) - start)
+                for r in meta["recordings"] if min(r["stop"], stop) > max(r["start"], start)])
         return replace(
-            self,
+            self, meta=meta,
             time=self.time[start:stop], rudder=self.rudder[start:stop],
             heading=self.heading[start:stop], yaw_rate=self.yaw_rate[start:stop],
             speed=None if self.speed is None else self.speed[start:stop],
@@ -92,15 +98,26 @@ class Dataset:
 def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_time: float,
                     gap_threshold: float | None = None, unwrap_heading: bool = True,
                     meta: dict | None = None) -> Dataset:
-    """Turn asynchronous time series into one uniformly sampled Dataset.
+    """Turn asynchronous time series into one uniformly sampled Dataset (see ``resample_signals``)."""
+    time, values, segments, gaps = resample_signals(series, sample_time, gap_threshold, unwrap_heading)
+    return Dataset(time=time, rudder=values["rudder"], heading=values["heading"], yaw_rate=values["yaw_rate"],
+                   speed=values.get("speed"), segments=segments, gaps=gaps,
+                   meta=dict(meta or {}, sample_time=sample_time))
+
+
+def resample_signals(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_time: float,
+                     gap_threshold: float | None = None, unwrap_heading: bool = True,
+                     required=("rudder", "heading", "yaw_rate")):
+    """Asynchronous time series on one uniform grid: ``(time, {name: values}, segments, gaps)``.
 
     ``series`` maps ``rudder``, ``heading``, ``yaw_rate`` (and optionally
-    ``speed``) to ``(stamps_s, values)``. Non-finite samples are dropped,
+    ``speed``, or any other signal) to ``(stamps_s, values)``; the ``required`` ones must be there.
+    Non-finite samples are dropped,
     stamps sorted and de-duplicated. The grid covers the span where every
     signal has data; values are linearly interpolated (heading after
     unwrapping). Where any signal has no sample for longer than
     ``gap_threshold`` (default 5 sample times) the grid is cut: the gap is
-    reported in ``Dataset.gaps`` and the segments on each side stay apart.
+    reported in ``gaps`` and the segments on each side stay apart.
     """
     if sample_time <= 0:
         raise DataError(f"sample_time must be > 0 s, got {sample_time}")
@@ -118,7 +135,6 @@ def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_tim
         if name == "heading" and unwrap_heading and len(values):
             values = np.unwrap(values)
         clean[name] = (stamps, values)
-    required = ("rudder", "heading", "yaw_rate")
     for name in required:
         if name not in clean or len(clean[name][0]) < 2:
             raise DataError(f"no usable {name} samples (need at least 2 finite samples)")
@@ -151,10 +167,69 @@ def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_tim
     remap[keep_idx] = np.arange(len(keep_idx))
     segments = [(int(remap[a]), int(remap[b - 1]) + 1) for a, b in segments]
     gaps = sorted(set(gaps))
-    return Dataset(
-        time=grid[keep_idx], rudder=out["rudder"][keep_idx], heading=out["heading"][keep_idx],
-        yaw_rate=out["yaw_rate"][keep_idx],
-        speed=out["speed"][keep_idx] if "speed" in out else None,
-        segments=tuple(segments), gaps=tuple(gaps),
-        meta=dict(meta or {}, sample_time=sample_time),
-    )
+    return grid[keep_idx], {name: values[keep_idx] for name, values in out.items()}, tuple(segments), tuple(gaps)
+
+
+def resampled(dataset: Dataset, sample_time: float) -> Dataset:
+    """The dataset on the grid step ``sample_time`` (s), each segment interpolated on its own
+    (nothing bridges a gap); unchanged when its step already is ``sample_time``."""
+    if np.isclose(dataset.sample_time, sample_time, rtol=1e-3):
+        return dataset
+    parts = []
+    for part in dataset.segment_datasets():
+        signals = {name: (part.time, getattr(part, name)) for name in ("rudder", "heading", "yaw_rate", "speed")
+                   if getattr(part, name) is not None}
+        if part.duration >= 2 * sample_time:
+            parts.append(resample_series(signals, sample_time, unwrap_heading=False))
+    if not parts:
+        raise DataError(f"{dataset.meta.get('source', 'a recording')} has no stretch of "
+                        f"{2 * sample_time:g} s to resample onto a {sample_time:g} s step")
+    return _concatenate(parts, [p.time for p in parts], dataset.gaps,
+                        dict(dataset.meta, sample_time=sample_time))
+
+
+def join_recordings(recordings: list[Dataset], names: list[str] | None = None,
+                    sample_time: float | None = None) -> Dataset:
+    """Several recordings as one Dataset, each its own segment(s), never bridged.
+
+    All are brought onto one grid step ``sample_time`` (s; default the first recording's) and laid
+    one after another in time, two steps apart. ``meta["recordings"]`` lists each recording as
+    ``{"name", "start", "stop"}`` (sample indices, stop exclusive); the names default to each
+    recording's ``meta["source"]``. A single recording gets its one entry too.
+    """
+    if not recordings:
+        raise DataError("no recordings given; name at least one bag or CSV file")
+    names = list(names) if names is not None else [
+        str(r.meta.get("source", f"recording {i + 1}")) for i, r in enumerate(recordings)]
+    if len(names) != len(recordings):
+        raise ValueError(f"{len(names)} names for {len(recordings)} recordings")
+    h = recordings[0].sample_time if sample_time is None else float(sample_time)
+    recordings = [resampled(r, h) for r in recordings]
+    times, gaps, entries, start, t0 = [], [], [], 0, float(recordings[0].time[0])
+    for name, r in zip(names, recordings):
+        shift = t0 - r.time[0]
+        if times:
+            gaps.append((float(times[-1][-1]), t0))
+        times.append(r.time + shift)
+        gaps += [(g0 + shift, g1 + shift) for g0, g1 in r.gaps]
+        entries.append({"name": name, "start": start, "stop": start + r.n_samples})
+        start += r.n_samples
+        t0 = float(r.time[-1] + shift + 2 * h)
+    return _concatenate(recordings, times, gaps,
+                        dict(recordings[0].meta, sample_time=h, recordings=entries))
+
+
+def _concatenate(parts: list[Dataset], times: list[np.ndarray], gaps, meta: dict) -> Dataset:
+    """``parts`` one after another on the given ``times`` (s), their segments kept apart; the speed
+    only when every part has one."""
+    segments, start = [], 0
+    for part in parts:
+        segments += [(a + start, b + start) for a, b in part.segments]
+        start += part.n_samples
+
+    def join(name: str) -> np.ndarray:
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    speed = None if any(p.speed is None for p in parts) else join("speed")
+    return Dataset(np.concatenate(times), join("rudder"), join("heading"), join("yaw_rate"), speed,
+                   tuple(segments), tuple(sorted(gaps)), meta)

@@ -235,30 +235,6 @@ def split(dataset: Dataset, training_fraction: float = TRAINING_FRACTION) -> tup
     return dataset.slice(0, cut), dataset.slice(cut, dataset.n_samples)
 
 
-def join_recordings(recordings: list[Dataset]) -> Dataset:
-    """Several recordings on one sample time as one Dataset, each its own segment (never bridged):
-    the held-out data of a cross-manoeuvre diagnosis on more than one run."""
-    if len(recordings) == 1:
-        return recordings[0]
-    h = recordings[0].sample_time
-    if any(not np.isclose(r.sample_time, h, rtol=1e-3) for r in recordings):
-        raise DataError("the validation recordings have different sample times; give --sample-time")
-    times, segments, gaps, start, t0 = [], [], [], 0, 0.0
-    for r in recordings:
-        shift = t0 - r.time[0]
-        if times:
-            gaps.append((float(times[-1][-1]), t0))
-        times.append(r.time + shift)
-        segments += [(a + start, b + start) for a, b in r.segments]
-        gaps += [(g0 + shift, g1 + shift) for g0, g1 in r.gaps]
-        start += r.n_samples
-        t0 = float(r.time[-1] + shift + 2 * h)
-    join = (lambda name: np.concatenate([getattr(r, name) for r in recordings]))
-    speed = None if any(r.speed is None for r in recordings) else join("speed")
-    return Dataset(np.concatenate(times), join("rudder"), join("heading"), join("yaw_rate"), speed,
-                   tuple(segments), tuple(gaps), dict(recordings[0].meta))
-
-
 def windows(dataset: Dataset, length_s: float) -> Dataset:
     """The dataset with every segment cut into windows of about ``length_s`` (each its own free run)."""
     step = max(int(round(length_s / dataset.sample_time)), 2)

@@ -191,6 +191,17 @@ class CubicYaw(Effect):
     def from_coefficients(self, coefficients, base):
         return {"alpha": -coefficients["r^3"]}
 
+    def data_bounds(self, dataset) -> dict:
+        """Bounds of alpha (s^2/rad^2) that keep the model stable over the turn rates the data
+        reach: about a steady turn r0 the linearised model damps with 1 + 3 alpha r0^2, so
+        alpha >= -1 / (3 r_max^2), r_max the largest measured |yaw rate| (rad/s). A negative
+        alpha beyond it makes a turn the boat was seen to make run away (the free run
+        diverges); the limit is the data's, not the sign's (seed 001's own alpha is negative)."""
+        r_max = float(np.max(np.abs(dataset.yaw_rate))) if dataset.n_samples else 0.0
+        alpha = self.parameters[0]
+        lower = max(alpha.lower, -1.0 / (3.0 * r_max ** 2)) if r_max > 0 else alpha.lower
+        return {"alpha": (lower, alpha.upper)}
+
     def evidence(self, context):
         c = _partial_corr(context.equation_residual, context.signals.r ** 3, [context.signals.r])
         return Evidence(abs(c) * np.sqrt(context.effective_samples),

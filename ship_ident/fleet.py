@@ -2,7 +2,7 @@
 
 ``ship-ident replay BAG... [--jobs N] [--dask ADDRESS|local] [--table OUT.csv] [--plot-dir DIR]``
 replays every bag exactly as ``ship-ident replay`` replays one (the node's
-``OnlineIdentifier``, the bag's time as its clock: replay's ``replay_bag``) in ``identify_bag``, one
+``OnlineIdentifier``, the bag's time as its clock: ``bag_replay.replay_bag``) in ``identify_bag``, one
 bag per task. ``--jobs N`` spreads the bags over N local processes
 (``concurrent.futures.ProcessPoolExecutor``); ``--dask ADDRESS`` sends the
 same tasks to a running Dask scheduler, ``--dask local`` starts a local Dask
@@ -36,12 +36,17 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
+from .bag_replay import replay_bag
 from .dataset import DataError
-from .errors import CommandError
-from .io import Topics
+from .jsonio import dumps_json
 from .online import ConfigError, OnlineConfig
+from .samples import Topics
 
 UNIX_TIME_AFTER_2001 = 1e9  # s: bag stamps above this are wall-clock dates
+
+
+class FleetError(ValueError):
+    """Unusable fleet options (vessel rule, worker count, missing Dask): one line for the user."""
 
 
 @dataclass(frozen=True)
@@ -69,14 +74,12 @@ class BagResult:
 
 def identify_bag(job: BagJob) -> BagResult:
     """Replay one bag as ``ship-ident replay`` does (``replay_bag``); the per-bag task of every executor."""
-    from .commands.replay import replay_bag
-
     result = BagResult(job)
     try:
         t0 = time.perf_counter()
         replay = replay_bag(job.bag, job.topics, job.config)
         total = time.perf_counter() - t0
-    except (DataError, ConfigError, CommandError) as exc:
+    except (DataError, ConfigError) as exc:
         result.error = str(exc)
         return result
     result.refits = len(replay.records)
@@ -109,7 +112,7 @@ def vessel_of(bag: str, rule: str = "parent") -> str:
         return path.stem.split("_", 1)[0]
     match = re.search(rule, str(path))
     if not match or not match.groups():
-        raise CommandError(f"--vessel-from {rule!r} has no match with a group in {path}; "
+        raise FleetError(f"--vessel-from {rule!r} has no match with a group in {path}; "
                            "use parent, prefix or a regular expression with one (group)")
     return match.group(1)
 
@@ -132,19 +135,11 @@ def add_fleet_arguments(parser) -> None:
                             "name up to the first '_'), or a regular expression whose first group is it")
 
 
-def run_fleet(args, bags: list[str]) -> int:
-    """Replay many bags (``args`` from replay's parser); table, plots, bags per minute. Exit code."""
-    from .commands.common import topics_from_args
-    from .jsonio import dumps_json
-    from .commands.replay import config_from_args  # lazily: replay imports this module
-
+def run_fleet(args, bags: list[str], topics: Topics, config: OnlineConfig) -> int:
+    """Replay many bags read by ``topics`` and fitted by ``config`` (the fleet options in ``args``, see
+    ``add_fleet_arguments``); table, plots, bags per minute. Exit code; FleetError on bad options."""
     if args.jobs < 1:
-        raise CommandError(f"--jobs must be >= 1, got {args.jobs}")
-    topics = topics_from_args(args)
-    try:
-        config = config_from_args(args, topics, has_speed=True)
-    except ConfigError as exc:
-        raise CommandError(str(exc)) from None
+        raise FleetError(f"--jobs must be >= 1, got {args.jobs}")
     jobs = [BagJob(str(bag), vessel_of(str(bag), args.vessel_from), topics, config) for bag in bags]
     wall0 = time.perf_counter()
     results = identify_bags(jobs, args.jobs, args.dask)
@@ -172,7 +167,7 @@ def identify_bags(jobs: list[BagJob], workers: int = 1, dask: str | None = None)
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError:
-            raise CommandError("--dask needs dask.distributed: pip install 'dask[distributed]' "
+            raise FleetError("--dask needs dask.distributed: pip install 'dask[distributed]' "
                                "(or the ship_ident[bench] extra)") from None
         if dask == "local":
             with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,

@@ -4,11 +4,18 @@ Reading accepts a rosbag2 directory (MCAP storage; ``metadata.yaml`` as
 ``ros2 bag record -s mcap`` or rosbags writes it), a directory holding
 ``.mcap`` files but no usable ``metadata.yaml`` (an interrupted recording,
 a copied folder), a bare ``.mcap`` file, or a CSV file
-``t,rudder,heading,yaw_rate[,speed]`` in SI units with a header line.
+``t,rudder,heading,yaw_rate[,speed]`` in SI units with a header line. CSV
+columns are found by name: the canonical names, common synonyms
+(``CSV_SYNONYMS``: e.g. ``surge_speed`` or ``u`` for the speed, ``delta`` for the
+rudder), or the user's own mapping (``Topics.csv_columns``, ``--columns``).
 
 Inputs are ``std_msgs/msg/Float64`` topics stamped with the bag's log time,
 or a ``sensor_msgs/msg/Imu`` topic (ROS ENU convention) for heading and yaw
 rate, converted to our NED convention: psi = pi/2 - yaw_enu, r = -omega_z.
+For the 3-DOF model, the body-fixed velocity comes from a ``nav_msgs/msg/Odometry``
+(its twist, in the child frame) or ``geometry_msgs/msg/TwistStamped`` topic in
+ROS's body frame (x forward, y to port): surge u = linear.x, sway v = -linear.y
+(our v is positive to starboard).
 
 Every unusable input raises ``DataError`` with one sentence saying what is
 wrong and what to do.
@@ -20,7 +27,6 @@ import math
 import shutil
 import struct
 import tempfile
-from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -31,38 +37,33 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import Stores, get_typestore
 
 from .dataset import DataError, Dataset, resample_series
+from .samples import ROLES, Sample, Topics
 
-ROLES = ("rudder", "heading", "yaw_rate", "speed")
 CSV_COLUMNS = ("t", "rudder", "heading", "yaw_rate", "speed")  # speed optional
+# Column names read as each role without --columns (matched case-insensitively, SI units only),
+# the canonical name first; a public simulator's CSV names the speed surge_speed.
+CSV_SYNONYMS = {
+    "t": ("t", "time", "t_s", "time_s", "timestamp"),
+    "rudder": ("rudder", "delta", "rudder_angle", "rudder_rad", "delta_rad"),
+    "heading": ("heading", "psi", "yaw", "heading_rad", "psi_rad"),
+    "yaw_rate": ("yaw_rate", "r", "yaw_rate_rad_s", "r_rad_s"),
+    "speed": ("speed", "surge_speed", "u", "speed_mps", "u_mps"),
+}
+# The 3-DOF model's body-fixed velocity (m/s, sway positive to starboard).
+VELOCITY_SYNONYMS = {"surge": ("surge_speed", "u", "surge", "u_mps"), "sway": ("sway_speed", "v", "sway", "v_mps")}
+THREEDOF_SYNONYMS = dict({r: CSV_SYNONYMS[r] for r in CSV_COLUMNS[:4]}, **VELOCITY_SYNONYMS)
 FLOAT64 = "std_msgs/msg/Float64"
 IMU = "sensor_msgs/msg/Imu"
+VELOCITY_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistStamped")
+TWIST_STAMPED = VELOCITY_TYPES[1]
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+DEFAULT_TOPICS = Topics()  # the node's default topic names
 BAD_BAG_ERRORS = (AnyReaderError, ReaderError, struct.error, EOFError, OSError, ValueError,
                   KeyError, IndexError, AssertionError)
 
 
 class UnreadableBag(DataError):
     """A bag whose files cannot be parsed (corrupt, truncated, unsupported metadata)."""
-
-
-@dataclass(frozen=True)
-class Topics:
-    """Input topic names; when ``imu`` is set, heading and yaw rate come from that Imu topic."""
-
-    rudder: str = "/usv/rudder"
-    heading: str = "/usv/heading"
-    yaw_rate: str = "/usv/yaw_rate"
-    speed: str = "/usv/speed"
-    imu: str = ""
-
-
-@dataclass(frozen=True)
-class Sample:
-    """One measurement: time in s, role in ROLES, value in SI units (NED)."""
-
-    time: float
-    role: str
-    value: float
 
 
 @lru_cache(maxsize=1)
@@ -73,8 +74,9 @@ def typestore():
 
 # --- reading -----------------------------------------------------------------
 
-def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
-    """All input samples of a bag or CSV file, time-ordered (see module docstring)."""
+def read_samples(path, topics: Topics = DEFAULT_TOPICS, csv_roles: dict = CSV_SYNONYMS) -> list[Sample]:
+    """All input samples of a bag or CSV file, time-ordered (see module docstring); a CSV file's
+    columns are those of the roles in ``csv_roles`` (role -> synonyms; all but speed required)."""
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path} does not exist; give a rosbag2 directory, a .mcap file or a CSV file")
@@ -85,7 +87,7 @@ def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
     elif path.suffix.lower() == ".mcap" or _starts_with_mcap_magic(path):
         samples = _read_bag([path], topics)
     elif path.suffix.lower() in (".csv", ".txt"):
-        samples = _read_csv(path)
+        samples = _read_csv(path, dict(topics.csv_columns), csv_roles)
     else:
         raise DataError(f"{path} is neither a bag (rosbag2 directory or .mcap file) nor a CSV file "
                         "(.csv); convert it or rename it")
@@ -94,15 +96,19 @@ def read_samples(path, topics: Topics = Topics()) -> list[Sample]:
     return samples
 
 
-def load_dataset(path, topics: Topics = Topics(), sample_time: float = 0.1) -> Dataset:
-    """A bag or CSV file resampled onto a uniform grid (gaps split segments, heading unwrapped)."""
+def load_dataset(path, topics: Topics = DEFAULT_TOPICS, sample_time: float = 0.1) -> Dataset:
+    """A bag or CSV file resampled onto a uniform grid (gaps split segments, heading unwrapped);
+    for a CSV file ``meta["columns"]`` maps each role to the column read."""
     samples = read_samples(path, topics)
     series = {}
     for role in ROLES:
         picked = [(s.time, s.value) for s in samples if s.role == role]
         if picked:
             series[role] = tuple(np.array(column) for column in zip(*picked))
-    return resample_series(series, sample_time, meta={"source": str(path)})
+    meta = {"source": str(path)}
+    if Path(path).suffix.lower() in (".csv", ".txt"):
+        meta["columns"] = csv_column_map(path, dict(topics.csv_columns))
+    return resample_series(series, sample_time, meta=meta)
 
 
 def _starts_with_mcap_magic(path: Path) -> bool:
@@ -146,15 +152,17 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
         wanted["imu"] = topics.imu
     else:
         wanted.update(heading=topics.heading, yaw_rate=topics.yaw_rate)
+    if topics.velocity:
+        wanted["velocity"] = topics.velocity
     missing = [t for role, t in wanted.items() if role != "speed" and t not in found]
     if missing:
         have = ", ".join(f"{t} ({m})" for t, m in sorted(found.items())) or "none"
         raise DataError(f"{name} has no topic {', '.join(missing)}; topics in it: {have}; "
                         "choose the topics with the --*-topic options")
     for role, topic in wanted.items():
-        expected = IMU if role == "imu" else FLOAT64
-        if topic in found and found[topic] != expected:
-            raise DataError(f"{name}: topic {topic} carries {found[topic]}, expected {expected}; "
+        expected = {"imu": (IMU,), "velocity": VELOCITY_TYPES}.get(role, (FLOAT64,))
+        if topic in found and found[topic] not in expected:
+            raise DataError(f"{name}: topic {topic} carries {found[topic]}, expected {' or '.join(expected)}; "
                             "choose another topic")
     role_of = {t: role for role, t in wanted.items() if t in found}
     samples = []
@@ -165,6 +173,8 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
         msg = reader.deserialize(raw, connection.msgtype)
         if role == "imu":
             samples.extend(imu_samples(msg, log_time * 1e-9))
+        elif role == "velocity":
+            samples.extend(velocity_samples(msg, log_time * 1e-9))
         else:
             samples.append(Sample(log_time * 1e-9, role, float(msg.data)))
         count += 1
@@ -175,14 +185,27 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
     return samples
 
 
+def header_time(msg, log_time: float) -> float:
+    """A stamped message's header time in s, or its log time where the header stamp is zero."""
+    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+    return stamp if stamp > 0 else log_time
+
+
 def imu_samples(msg, log_time: float) -> tuple[Sample, Sample]:
     """Heading and yaw rate (NED) from an ENU Imu message, stamped by its header when set."""
-    stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-    time = stamp if stamp > 0 else log_time
+    time = header_time(msg, log_time)
     q = msg.orientation
     yaw_enu = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
     return (Sample(time, "heading", wrap_angle(math.pi / 2 - yaw_enu)),
             Sample(time, "yaw_rate", -float(msg.angular_velocity.z)))
+
+
+def velocity_samples(msg, log_time: float) -> tuple[Sample, Sample]:
+    """Surge u and sway v (m/s, v positive to starboard) from an Odometry or TwistStamped message
+    in ROS's body frame (y to port), stamped by its header when set."""
+    time = header_time(msg, log_time)
+    twist = msg.twist.twist if hasattr(msg, "child_frame_id") else msg.twist
+    return Sample(time, "surge", float(twist.linear.x)), Sample(time, "sway", -float(twist.linear.y))
 
 
 def wrap_angle(angle: float) -> float:
@@ -191,32 +214,110 @@ def wrap_angle(angle: float) -> float:
     return math.pi if wrapped == -math.pi else wrapped
 
 
-def _read_csv(path: Path) -> list[Sample]:
+def parse_columns(text: str) -> tuple[tuple[str, str], ...]:
+    """``speed=surge_speed,rudder=delta`` as ((role, column), ...); an unknown role, a pair without
+    ``=`` or a role named twice raises DataError."""
+    pairs = []
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        role, sep, column = (x.strip() for x in item.partition("="))
+        if not sep or not role or not column:
+            raise DataError(f"--columns item {item!r} is not ROLE=COLUMN; "
+                            "e.g. --columns speed=surge_speed,rudder=delta")
+        if role not in CSV_SYNONYMS and role not in VELOCITY_SYNONYMS:
+            raise DataError(f"--columns: unknown role {role!r}; roles are "
+                            f"{', '.join([*CSV_SYNONYMS, *VELOCITY_SYNONYMS])}")
+        if role in dict(pairs):
+            raise DataError(f"--columns names the role {role!r} twice; give each role once")
+        pairs.append((role, column))
+    return tuple(pairs)
+
+
+def resolve_columns(header: list[str], chosen: dict[str, str], synonyms: dict[str, tuple[str, ...]],
+                    required, source) -> dict[str, str]:
+    """Which header column each role of ``synonyms`` is read from: the user's ``chosen`` column
+    (which must exist), else the first synonym present (case-insensitive). A ``required`` role
+    without a column, or one column for two roles, raises DataError naming the columns found."""
+    by_name = {h.lower(): h for h in header}
+    found = ", ".join(header) or "none"
+    mapping = {}
+    for role, column in chosen.items():
+        if role not in synonyms:
+            raise DataError(f"--columns {role}={column}: this model reads no {role}; its roles are "
+                            f"{', '.join(synonyms)}")
+        if column not in header:
+            raise DataError(f"{source} has no column {column!r} (--columns {role}={column}); its columns: {found}")
+        mapping[role] = column
+    for role, names in synonyms.items():
+        if role not in mapping:
+            match = next((by_name[n] for n in names if n in by_name and by_name[n] not in mapping.values()), None)
+            if match is not None:
+                mapping[role] = match
+    missing = [role for role in required if role not in mapping]
+    for role in missing:
+        taken = next((by_name[n] for n in synonyms[role] if by_name.get(n) in mapping.values()), None)
+        if taken is not None:
+            other = next(r for r, c in mapping.items() if c == taken)
+            raise DataError(f"{source}: column {taken!r} is read as {other} (--columns), so {role} has "
+                            f"none; name its column with --columns {role}=NAME")
+    if missing:
+        raise DataError(f"{source} has no column for {', '.join(missing)}; its columns: {found}; "
+                        f"name them with --columns, e.g. --columns {missing[0]}=NAME (SI units)")
+    twice = sorted({c for c in mapping.values() if list(mapping.values()).count(c) > 1})
+    if twice:
+        raise DataError(f"{source}: column {twice[0]!r} is named for two roles; give each role its own column")
+    return mapping
+
+
+def _csv_header(path: Path) -> list[str]:
     with path.open(newline="") as f:
-        rows = csv.reader(f)
-        header = [h.strip() for h in next(rows, [])]
-        missing = [c for c in CSV_COLUMNS[:4] if c not in header]
-        if missing:
-            raise DataError(f"{path} lacks the column(s) {', '.join(missing)}; the CSV needs the "
-                            "header line t,rudder,heading,yaw_rate[,speed] (SI units)")
-        columns = {c: header.index(c) for c in CSV_COLUMNS if c in header}
-        samples = []
-        for line, row in enumerate(rows, start=2):
+        return [h.strip() for h in next(csv.reader(f), [])]
+
+
+def csv_column_map(path, chosen: dict[str, str] | None = None, synonyms=CSV_SYNONYMS,
+                   required=CSV_COLUMNS[:4]) -> dict[str, str]:
+    """Role -> CSV column read for the roles of ``synonyms`` (default: the Nomoto model's) of
+    ``path`` (see ``resolve_columns``)."""
+    path = Path(path)
+    return resolve_columns(_csv_header(path), chosen or {}, synonyms, required, path)
+
+
+def is_canonical(mapping: dict[str, str]) -> bool:
+    """True when every role is read from its canonical column (the first of its synonyms)."""
+    canonical = {role: names[0] for role, names in {**CSV_SYNONYMS, **VELOCITY_SYNONYMS}.items()}
+    return all(canonical[role] == column for role, column in mapping.items())
+
+
+def read_csv_columns(path: Path, mapping: dict[str, str]) -> dict[str, np.ndarray]:
+    """The mapped columns of a CSV file as float arrays {role: values}; a row that is not numbers
+    raises DataError naming its line."""
+    header = _csv_header(path)
+    index = {role: header.index(column) for role, column in mapping.items()}
+    rows = []
+    with path.open(newline="") as f:
+        lines = csv.reader(f)
+        next(lines, None)
+        for line, row in enumerate(lines, start=2):
             if not row:
                 continue
             try:
-                values = {c: float(row[i]) for c, i in columns.items()}
+                rows.append([float(row[i]) for i in index.values()])
             except (ValueError, IndexError):
-                raise DataError(f"{path} line {line} is not {len(columns)} numbers: {','.join(row)!r}; "
+                raise DataError(f"{path} line {line} is not {len(header)} numbers: {','.join(row)!r}; "
                                 "fix or delete that line") from None
-            samples.extend(Sample(values["t"], role, values[role]) for role in ROLES if role in values)
-    if not samples:
+    if not rows:
         raise DataError(f"{path} holds a header but no data rows; export the data again")
-    return samples
+    return dict(zip(index, np.array(rows).T))
+
+
+def _read_csv(path: Path, chosen: dict[str, str], roles: dict) -> list[Sample]:
+    mapping = csv_column_map(path, chosen, roles, [r for r in roles if r != "speed"])
+    columns = read_csv_columns(path, mapping)
+    return [Sample(float(t), role, float(columns[role][i]))
+            for i, t in enumerate(columns["t"]) for role in columns if role != "t"]
 
 
 def _check_not_all_nan(path: Path, samples: list[Sample]) -> None:
-    for role in ROLES:
+    for role in dict.fromkeys(s.role for s in samples):
         values = [s.value for s in samples if s.role == role]
         if values and not any(math.isfinite(v) for v in values):
             raise DataError(f"{path}: every {role} sample is NaN or Inf; check the sensor or the export")
@@ -267,7 +368,7 @@ class BagWriter:
             next(self._bag_dir.glob("*.mcap")).replace(self.path)
             shutil.rmtree(self._bag_dir.parent)
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -70,15 +70,19 @@ PARAMETER_DOCS = {
     "min_fit_correlation": ("free-run yaw-rate correlation below which the fit is reported poor",
                             (0.0, 1.0), False),
     "stale_timeout": ("s without a sample before an input is reported stale", (0.01, 3600.0), False),
-    "gap_threshold": ("s without a sample that splits the window into segments", (0.01, 3600.0), False),
+    "gap_threshold": ("s without a sample that splits the window into segments (>= sample_time); "
+                      "0: five sample times", (0.0, 3600.0), False),
+    "rudder_limit": ("rad, the steering gear's limit: a rudder held there for half the window is "
+                     "reported rudder_saturated", (0.01, 1.5708), False),
     "clock_jump_threshold": ("s; a clock step back this large resets the window", (0.01, 3600.0), False),
     "max_window_samples": ("hard bound on stored samples per input (about 110 bytes each)",
                            (100, MAX_WINDOW_SAMPLES), False),
     "prediction_horizon": ("s of free run from the measured state behind ~/predicted_yaw_rate",
                            (0.1, 3600.0), False),
     "change_ratio": ("ratio (mean squares) of the last model's free-run yaw-rate error over the newest "
-                     "change_test_length s to its usual level beyond which, on two refits in a row, the "
-                     "vessel counts as changed and the window restarts; 0: never", (0.0, 1e6), False),
+                     "change_test_length s to its usual level beyond which, on two refits in a row (or 4x it "
+                     "once over the newest refit period), the vessel counts as changed and the window "
+                     "restarts; 0: never", (0.0, 1e6), False),
     "change_test_length": ("s of newest data the change test runs the last model over", (1.0, 3600.0), False),
     "qos_reliability": ("input QoS reliability: best_effort (sensor data) or reliable", None, True),
     "qos_depth": ("input QoS history depth (messages kept per topic)", (1, 10000), True),

@@ -27,12 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .change import ChangeDetector
+from .change import ChangeDetector, block_errors, covering_blocks, fit_gain
 from .jsonio import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import DEFAULT_METHOD, MethodError, make_estimator
-from .estimators.base import MIN_RUDDER_STD
-from .io import ROLES, Sample, Topics
+from .estimators.base import MIN_RUDDER_STD, Estimate, excitation_shortfall
+from .metrics import free_run_fit
+from .samples import ROLES, Sample, Topics
 from .structure import Structure, StructureError
 
 REQUIRED_ROLES = ("rudder", "heading", "yaw_rate")
@@ -61,6 +62,7 @@ CONDITION_LEVELS = {
     "rejected_samples": WARN,
     "clock_jump": WARN,
     "vessel_changed": WARN,
+    "implausible_estimate": WARN,
     "window_truncated": WARN,
     "heading_in_degrees": WARN,
     "yaw_rate_sign": WARN,
@@ -79,10 +81,25 @@ HEADING_BASELINE = 1.0              # s
 MIN_TURN_RATE_STD = math.radians(0.5)  # rad/s: with less turning the slope says nothing
 DEGREES_SLOPE = 10.0                # slope beyond this: heading in degrees (57.3)
 DEGREE_WRAP = (300.0, 420.0)        # a heading step this large is a wrap at 360 (degrees)
-# Rudder saturation: a single extreme value held (within SATURATION_TOLERANCE) for this share.
+# Rudder saturation: a single extreme value, within SATURATION_TOLERANCE of the steering gear's
+# limit, held (within SATURATION_TOLERANCE) for this share of the window.
 SATURATION_SHARE = 0.5
-SATURATION_TOLERANCE = math.radians(0.5)  # rad
-SATURATION_MIN_ANGLE = math.radians(5.0)  # rad: holding smaller angles is not saturation
+SATURATION_TOLERANCE = math.radians(1.0)  # rad
+GAP_SAMPLES = 5                     # gap_threshold 0: an input pause of this many sample times splits
+
+# Trust in a new estimate against the last good one (see OnlineIdentifier._distrust).
+JUMP_STANDARD_ERRORS = 5.0          # a jump beyond this many joint standard errors needs evidence
+CLEAR_IMPROVEMENT = 2.0             # ... its free run over the newest data this many times better
+                                    # (mean squares) than the last good one's, or the next refit agreeing
+FREE_RUN_TOLERANCE = 1.25           # a new estimate's free run may miss the window at most this much
+                                    # more (mean squares) than the last good one's
+# Refitted on the new data after a change, the first set the data determine: the gain with the main
+# time constant, or alone, once the new data span this many main time constants (of the last good
+# estimate; shorter, the free run's unknown start dominates). The rudder offset is held: loading does
+# not move it, and a held rudder cannot tell it from the gain.
+GAIN_FITS = ((("K", "T", "T1"), 4.0), (("K",), 2.0))
+MIN_GAIN_SAMPLES = 20              # new samples needed for the gain refit after a change
+SCATTER_PAIRS = 20                  # successive estimates whose scatter sets the published uncertainty
 
 REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
 
@@ -119,9 +136,11 @@ class OnlineConfig:
     method: str = DEFAULT_METHOD
     min_window_length: float = 60.0       # s of data before the first fit
     min_rudder_std: float = float(MIN_RUDDER_STD)  # rad: less rudder activity gives no new estimate
+    rudder_limit: float = math.radians(35.0)  # rad, the steering gear's limit (rudder_saturated there)
     min_fit_correlation: float = 0.8      # free-run yaw-rate correlation below this is a poor fit
     stale_timeout: float = 1.0            # s without a sample on an input before it is stale
-    gap_threshold: float = 0.5            # s without a sample that splits the window
+    gap_threshold: float = 0.0            # s without a sample that splits the window; 0: GAP_SAMPLES
+                                          # sample times
     clock_jump_threshold: float = 1.0     # s: a stamp this far back is a clock jump (window reset);
                                           # forward, a step beyond max(this, refit_period) is one
     max_window_samples: int = 20000       # hard bound on stored samples per input
@@ -139,8 +158,7 @@ class OnlineConfig:
     def validate(self) -> "OnlineConfig":
         """Raise ConfigError naming the first bad value; return self when all are usable."""
         positive = ("sample_time", "window_length", "refit_period", "stale_timeout",
-                    "gap_threshold", "clock_jump_threshold", "prediction_horizon",
-                    "change_test_length")
+                    "clock_jump_threshold", "prediction_horizon", "change_test_length", "rudder_limit")
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -153,9 +171,11 @@ class OnlineConfig:
         if self.window_length < 20 * self.sample_time:
             raise ConfigError(f"window_length {self.window_length} s holds fewer than 20 samples "
                               f"of {self.sample_time} s")
-        if self.gap_threshold < self.sample_time:
-            raise ConfigError(f"gap_threshold {self.gap_threshold} s must be >= sample_time "
-                              f"{self.sample_time} s")
+        if not (self.gap_threshold == 0 or self.sample_time <= self.gap_threshold < math.inf):
+            raise ConfigError(f"gap_threshold must be 0 ({GAP_SAMPLES} sample times) or >= sample_time "
+                              f"{self.sample_time} s, got {self.gap_threshold!r}")
+        if self.rudder_limit > math.radians(90.0):
+            raise ConfigError(f"rudder_limit must be <= 1.571 rad (90 deg), got {self.rudder_limit}")
         if not 0 <= self.min_rudder_std < 0.5:
             raise ConfigError(f"min_rudder_std must be in [0, 0.5) rad, got {self.min_rudder_std}")
         if not (self.change_ratio == 0 or 1 < self.change_ratio < math.inf):
@@ -187,6 +207,11 @@ class OnlineConfig:
 
     def structure(self) -> Structure:
         return Structure(self.model, list(self.effects))
+
+    @property
+    def gap(self) -> float:
+        """s without a sample that splits the window: gap_threshold, or GAP_SAMPLES sample times."""
+        return self.gap_threshold or GAP_SAMPLES * self.sample_time
 
     def changed(self, **values) -> "OnlineConfig":
         """A validated copy with some values replaced."""
@@ -269,9 +294,11 @@ class OnlineIdentifier:
         self._last_jump = 0.0
         self._last_good = None      # Estimate of the current structure
         self._last_good_window = (math.nan, math.nan)
-        self._change = ChangeDetector(config.change_ratio, config.change_test_length)
+        self._change = ChangeDetector(config.change_ratio, config.change_test_length, _short_test(config))
         self._window_floor = -math.inf  # s: where the vessel last changed; older data are dropped
         self._change_note = None    # sentence reported until the first estimate after a change
+        self._candidate = None      # the last estimate held for jumping: the next may confirm it
+        self._scatter = EstimateScatter()
 
     # --- configuration ---------------------------------------------------
     @property
@@ -283,9 +310,11 @@ class OnlineIdentifier:
         config = config.validate()
         with self._lock:
             if (config.model, config.effects) != (self._config.model, self._config.effects):
-                self._last_good = None
+                self._last_good = self._candidate = None
                 self._change.forget()
+                self._scatter.forget()
             self._change.ratio, self._change.length = config.change_ratio, config.change_test_length
+            self._change.short = _short_test(config)
             if config.refit_period != self._config.refit_period and self._next_due is not None:
                 self._next_due = min(self._next_due, self._latest_time + config.refit_period)
             self._config = config
@@ -333,6 +362,7 @@ class OnlineIdentifier:
                 self._newest[role] = -math.inf
             self._window_floor = -math.inf
             self._change.forget()   # its references belong to the old time line
+            self._scatter.forget()
         elif not now > self._latest_time + max(config.clock_jump_threshold, config.refit_period) \
                 or self._latest_time == -math.inf:
             self._latest_time = max(self._latest_time, now)
@@ -385,6 +415,8 @@ class OnlineIdentifier:
         conditions = self._input_conditions(config, series, newest, now, fresh, last_jump)
         if change_note:
             conditions["vessel_changed"] = change_note
+            if last_good is not None:  # the new data are being fitted (K first): not a first fit
+                conditions.pop("window_filling", None)
         conditions.update(_truncation(config, series, full, now))
         conditions.update(_heading_plausibility(series))
         record = RefitRecord(time=now, conditions=conditions, counts=counts)
@@ -434,21 +466,23 @@ class OnlineIdentifier:
         roles = [r for r in ROLES if r != "speed" or config.speed_topic]
         try:
             dataset = resample_series({r: (series[r][:, 0], series[r][:, 1]) for r in roles},
-                                      config.sample_time, config.gap_threshold)
+                                      config.sample_time, config.gap)
         except DataError as exc:
             record.conditions["refit_failed"] = f"window unusable: {exc}"
             return
         structure = config.structure()
         if last_good is not None and self._change_note is None:
             dataset = self._test_for_change(config, structure, dataset, record)
-            if dataset is None:
-                return
+        if self._change_note is not None and last_good is not None \
+                and dataset.duration < config.min_window_length - 0.5 * config.sample_time:
+            self._follow_gain(config, structure, dataset, last_good, record)
+            return
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.gaps:
             longest = max(b - a for a, b in dataset.gaps)
             record.conditions["gap_in_window"] = (f"{len(dataset.gaps)} gap(s) in the window, longest "
                                                   f"{longest:.1f} s; fitting the segments apart")
-        record.conditions.update(_rudder_saturation(dataset.rudder))
+        record.conditions.update(_rudder_saturation(dataset.rudder, config.rudder_limit))
         rudder_std = float(np.std(dataset.rudder))
         if rudder_std < config.min_rudder_std:
             record.conditions["too_little_excitation"] = (
@@ -471,10 +505,14 @@ class OnlineIdentifier:
         if not estimate.ok:
             if "low_excitation" in estimate.flags:
                 record.conditions["too_little_excitation"] = \
-                    "the yaw rate hardly moves in the window; keeping the last good estimate"
+                    f"{excitation_shortfall(dataset)}; keeping the last good estimate"
             else:
                 record.conditions["refit_failed"] = (f"estimate rejected ({', '.join(estimate.flags)}); "
                                                      "keeping the last good estimate")
+            return
+        undetermined = excitation_shortfall(dataset, estimate.parameters, estimate.std_errors)
+        if undetermined:
+            record.conditions["too_little_excitation"] = f"{undetermined}; keeping the last good estimate"
             return
         correlation = estimate.fit.get("r_yaw_rate", math.nan)
         at_bounds = [f for f in estimate.flags if f in POOR_FIT_FLAGS]
@@ -484,39 +522,129 @@ class OnlineIdentifier:
                 f"{config.min_fit_correlation:g}){', ' + ', '.join(at_bounds) if at_bounds else ''}: "
                 "the model misses the motion; keeping the last good estimate")
             return
-        record.estimate = estimate.to_json()
+        published = replace(estimate, std_errors=self._scatter.honest(estimate))
+        distrust = self._distrust(config, structure, published, dataset, last_good)
+        if distrust:
+            record.conditions["implausible_estimate"] = f"{distrust}; keeping the last good estimate"
+            return
+        self._publish(config, structure, estimate, published, dataset, record)
+        if dataset.duration >= config.window_length - 1.5 * config.sample_time:
+            self._change.calibrate(structure, estimate, dataset)  # a full window's model
+        with self._lock:
+            self._change_note = None
+
+    def _publish(self, config, structure, estimate, published, dataset, record, scatter=True) -> None:
+        """Make ``published`` (``estimate`` with the published standard errors) the estimate in force;
+        ``scatter``: a full fit, whose scatter about the next ones sets their published errors."""
+        if scatter:
+            self._scatter.add(estimate)
+        record.estimate = published.to_json()
         record.estimate.pop("info", None)
         record.new_estimate = True
         record.predicted_yaw_rate, record.measured_yaw_rate = self._predict(
             config, structure, estimate.parameters, dataset)
-        if dataset.duration >= config.window_length - 1.5 * config.sample_time:
-            self._change.calibrate(structure, estimate, dataset)  # a full window's model
         with self._lock:
             if (config.model, config.effects) == (self._config.model, self._config.effects):
-                self._last_good, self._last_good_window = estimate, record.window
-            self._change_note = None
+                self._last_good, self._last_good_window = published, record.window
+            self._candidate = None
+
+    def _follow_gain(self, config, structure, dataset, last_good, record) -> None:
+        """After a change, while the new data are shorter than ``min_window_length``: the first set
+        of GAIN_FITS they span and determine (K with the main time constant T1 or T, or K alone) refitted
+        on them, run free in blocks of ``change_test_length``, the other parameters held from the
+        last good estimate (a free run is almost linear in K; a held rudder determines it);
+        published when they determine K and pass the checks of any new estimate."""
+        record.window = (float(dataset.time[0]), float(dataset.time[-1]))
+        if dataset.n_samples < MIN_GAIN_SAMPLES:
+            return
+        blocks = covering_blocks(dataset, int(round(config.change_test_length / dataset.sample_time)))
+        time_constant = last_good.parameters.get("T1", last_good.parameters.get("T"))
+        fits = [names for names, spans in GAIN_FITS if dataset.duration >= spans * time_constant]
+        if not fits:
+            return
+        try:
+            for names in fits:  # the most the new data determine
+                params, errors = fit_gain(structure, last_good.parameters, dataset, blocks, names)
+                if not excitation_shortfall(dataset, params, errors):
+                    break
+            psi, r = structure.simulate(params, dataset)
+        except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
+            record.conditions["refit_failed"] = f"gain refit after the change: {type(exc).__name__}: {exc}"
+            return
+        fit = free_run_fit(dataset.heading, dataset.yaw_rate, psi, r)
+        estimate = Estimate(structure, last_good.method, params, dict(last_good.std_errors, **errors), fit,
+                            dataset.n_samples, flags=["diverged"] if fit["diverged"] else [], window=record.window)
+        undetermined = "it diverged" if fit["diverged"] else excitation_shortfall(
+            dataset, {n: params[n] for n in errors}, errors)
+        reason = undetermined or self._distrust(config, structure, estimate, dataset, last_good)
+        if reason:
+            record.conditions["too_little_excitation" if undetermined else "implausible_estimate"] = (
+                f"gain refit on the {dataset.duration:.0f} s since the change: {reason}; keeping the last "
+                "good estimate")
+            return
+        self._publish(config, structure, estimate, estimate, dataset, record, scatter=False)
+
+    def _distrust(self, config, structure, estimate, dataset, last_good) -> str | None:
+        """Why a new estimate (published standard errors) must not replace the last good one, or None.
+
+        It sits on a physical bound; or its free run misses this window more than the last good
+        estimate's (FREE_RUN_TOLERANCE, mean squares over blocks of ``change_test_length``, each run
+        free from the measured state); or its
+        gain or main time constant jumps beyond JUMP_STANDARD_ERRORS joint standard errors from the
+        last good one, and neither does its free run over the newest ``change_test_length`` s beat
+        the last good one's CLEAR_IMPROVEMENT times (a changed vessel shows there first), nor does
+        the previous refit's held estimate agree with it."""
+        on_bound = _on_bound(structure, estimate.parameters)
+        if on_bound:
+            return f"{on_bound}: the search ran to a physical limit, not to the vessel"
+        if last_good is None or last_good.structure.label() != structure.label():
+            return None
+        n = int(round(config.change_test_length / dataset.sample_time))
+        blocks = covering_blocks(dataset, n)
+        new_error, old_error = (float(np.mean(block_errors(structure, p, dataset, blocks)))
+                                for p in (estimate.parameters, last_good.parameters))
+        if not new_error <= FREE_RUN_TOLERANCE * old_error:
+            return (f"its free run misses the window more than the last good estimate's (yaw-rate rms "
+                    f"{math.degrees(math.sqrt(new_error)):.3f} vs {math.degrees(math.sqrt(old_error)):.3f} deg/s)")
+        jump, name = _jump(estimate, last_good)
+        if jump <= JUMP_STANDARD_ERRORS:
+            return None
+        newest = blocks[-1:]
+        new_newest, old_newest = (float(block_errors(structure, p, dataset, newest)[0])
+                                  for p in (estimate.parameters, last_good.parameters))
+        if old_newest >= CLEAR_IMPROVEMENT * new_newest:
+            return None
+        candidate, self._candidate = self._candidate, estimate
+        if candidate is not None and candidate.structure.label() == structure.label() \
+                and _jump(estimate, candidate)[0] <= JUMP_STANDARD_ERRORS:
+            return None
+        return (f"{name} {estimate.parameters[name]:.4g} +- {estimate.std_errors[name]:.2g} jumps "
+                f"{jump:.0f} standard errors from the last good {last_good.parameters[name]:.4g} +- "
+                f"{last_good.std_errors[name]:.2g}, and its free run over the newest "
+                f"{config.change_test_length:g} s is not clearly better (yaw-rate rms "
+                f"{math.degrees(math.sqrt(new_newest)):.3f} vs {math.degrees(math.sqrt(old_newest)):.3f} "
+                "deg/s); held until a refit confirms it")
 
     def _test_for_change(self, config, structure, dataset, record):
         """Run the change test; on a change, restart the window where it happened and return the
-        data after it (None when they are too few for a fit yet)."""
+        data after it."""
         try:
             ratio, changed_at = self._change.test(structure, dataset)
         except (DataError, StructureError, ValueError):
             return dataset
         if changed_at is None:
             return dataset
-        note = (f"the newest model fitted before the last {config.change_test_length:g} s mispredicts them "
+        note = (f"the newest model fitted before the newest data (the last {_short_test(config):g} or "
+                f"{config.change_test_length:g} s) mispredicts them "
                 f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
                 f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
-                f"the window restarts at {changed_at:.1f} s, where the error stepped up (new estimate "
-                f"from {config.min_window_length:g} s of new data)")
+                f"the window restarts at {changed_at:.1f} s, where the error stepped up (K refitted on the "
+                f"new data with the time constants held until they span {config.min_window_length:g} s)")
         with self._lock:
             self._window_floor, self._change_note = changed_at, note
+            self._scatter.forget()  # the new response's estimates scatter about other values
         record.conditions["vessel_changed"] = note
-        dataset = dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
-        if dataset.duration < config.min_window_length - 0.5 * config.sample_time:
-            return None
-        return dataset
+        return dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
 
     @staticmethod
     def _predict(config, structure, params, dataset) -> tuple[float, float]:
@@ -595,15 +723,84 @@ def _integral_at(time: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.nda
     return np.interp(at, time, cumulative)
 
 
-def _rudder_saturation(rudder: np.ndarray) -> dict:
-    """One extreme rudder angle held for most of the window: saturated (or stuck) rudder."""
+def _rudder_saturation(rudder: np.ndarray, limit: float) -> dict:
+    """The rudder held at the steering gear's limit (rad) for most of the window: saturated (or
+    stuck there). A zigzag or a turn holding a smaller angle is not saturation."""
     for extreme in (np.percentile(rudder, 99.5), np.percentile(rudder, 0.5)):
         share = float(np.mean(np.abs(rudder - extreme) <= SATURATION_TOLERANCE))
-        if abs(extreme) >= SATURATION_MIN_ANGLE and share >= SATURATION_SHARE:
+        if abs(extreme) >= limit - SATURATION_TOLERANCE and share >= SATURATION_SHARE:
             return {"rudder_saturated": (f"rudder held at {math.degrees(extreme):+.1f} deg for "
                                          f"{100 * share:.0f} % of the window (saturated or stuck): "
                                          "the fit rests on the remaining samples")}
     return {}
+
+
+def _short_test(config: OnlineConfig) -> float:
+    """s of newest data of the change detector's quick test: one refit period, 3 s to a third of
+    ``change_test_length``."""
+    return min(max(config.refit_period, 3.0), config.change_test_length / 3)
+
+
+def _on_bound(structure: Structure, params: dict) -> str:
+    """'T1 = 999.5 s on its bound 1000 s' for parameters at a physical bound ('' when none); a zero
+    lower bound (no lead, no dead time) is physical, not a limit."""
+    found = []
+    for name in structure.free_names:
+        parameter, value = structure.parameter(name), params[name]
+        for bound in (parameter.lower, parameter.upper):
+            if bound != 0 and math.isfinite(bound) and abs(value - bound) <= 1e-3 * abs(bound):
+                found.append(f"{name} = {value:.4g} {parameter.unit} on its bound {bound:g}")
+    return ", ".join(found)
+
+
+def _jump(estimate, reference) -> tuple[float, str]:
+    """The largest jump of the gain or main time constant between two estimates, in joint standard
+    errors, and the parameter's name."""
+    jumps = []
+    for name in ("K", "T", "T1"):
+        if name in estimate.parameters and name in reference.parameters:
+            joint = math.hypot(estimate.std_errors.get(name, 0.0), reference.std_errors.get(name, 0.0))
+            step = abs(estimate.parameters[name] - reference.parameters[name])
+            jumps.append((step / joint if joint > 0 else (math.inf if step else 0.0), name))
+    return max(jumps)
+
+
+class EstimateScatter:
+    """Standard errors that cover the scatter of successive estimates, model error included.
+
+    The estimator's standard errors know the sensor noise only. Two estimates of a right model
+    from windows sharing a share f of their data differ by about sqrt((1 - f) (s1^2 + s2^2)), so
+    the differences of the last SCATTER_PAIRS successive estimates, in those units, have an RMS
+    of about 1; where the model misses the vessel (or the data cannot separate two parameters)
+    they scatter further, and each parameter's standard error is multiplied by its RMS when above 1.
+    """
+
+    def __init__(self):
+        self.recent = deque(maxlen=SCATTER_PAIRS)  # accepted estimates (estimator's errors), oldest first
+
+    def add(self, estimate) -> None:
+        self.recent.append(estimate)
+
+    def forget(self) -> None:
+        self.recent.clear()
+
+    def factors(self, estimate) -> dict:
+        """{parameter: inflation factor >= 1} from the recent estimates and this one."""
+        chain_ = list(self.recent) + [estimate]
+        squares = {name: [] for name in estimate.parameters}
+        for a, b in zip(chain_, chain_[1:]):
+            overlap = max(0.0, min(a.window[1], b.window[1]) - max(a.window[0], b.window[0]))
+            span = max(a.window[1] - a.window[0], b.window[1] - b.window[0], 1e-9)
+            fresh = max(1.0 - overlap / span, 1e-3)
+            for name in squares:
+                joint = math.hypot(a.std_errors.get(name, 0.0), b.std_errors.get(name, 0.0))
+                if joint > 0 and math.isfinite(joint) and name in a.parameters:
+                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / (fresh * joint ** 2))
+        return {name: max(1.0, math.sqrt(float(np.mean(z)))) if z else 1.0 for name, z in squares.items()}
+
+    def honest(self, estimate) -> dict:
+        factors = self.factors(estimate)
+        return {name: std * factors.get(name, 1.0) for name, std in estimate.std_errors.items()}
 
 
 class EstimateLog:

@@ -16,7 +16,7 @@ import numpy as np
 from .dataset import Dataset
 from .structure import Structure
 
-MANEUVERS = ("zigzag10", "zigzag20", "turning", "random", "mixed")
+MANEUVERS = ("zigzag10", "zigzag20", "turning", "random", "mixed", "steps", "steady_turns", "legs")
 
 
 @dataclass(frozen=True)
@@ -64,9 +64,11 @@ VESSEL_KINDS = {
 def random_vessel(rng: np.random.Generator, kind: str = "any") -> "Vessel":
     """A vessel drawn at random over wide ranges (``VESSEL_KINDS``; ``any``: a USV two times in
     three, else a slow ship). T2 is a share of T1 and capped at 1.5 s for USVs; the cubic
-    damping alpha is drawn so that alpha r^2 lies in [-0.2, 0.5] at the turn rate of 20 deg of
-    rudder (K * 0.35 rad), the rudder offset in +-1.5 deg; all other effect parameters take the
-    presets' values. The name carries the drawn values, so a failing case can be read off."""
+    damping alpha is drawn so that alpha r^2 lies in [-0.1, 0.5] at the turn rate of the rudder
+    at its limit (K * limit): with alpha < 0 the steady turn r + alpha r^3 = K delta exists only
+    while -alpha (K delta)^2 < 4/27, so every rudder the gear can give still ends in a steady
+    turn (a draw at -0.2 for 20 deg of rudder spun up without bound at 25 deg); the rudder
+    offset in +-1.5 deg; all other effect parameters take the presets' values. The name carries the drawn values, so a failing case can be read off."""
     if kind == "any":
         kind = "usv" if rng.uniform() < 2 / 3 else "ship"
     if kind not in VESSEL_KINDS:
@@ -80,17 +82,18 @@ def random_vessel(rng: np.random.Generator, kind: str = "any") -> "Vessel":
     t2 = t1 * rng.uniform(*ranges["T2_share"])
     t2 = min(t2, 1.5) if kind == "usv" else t2
     t3 = float(rng.uniform(*ranges["T3"]))
-    turn_rate = k_gain * np.radians(20.0)
+    damping_at_limit = float(rng.uniform(-0.1, 0.5))  # alpha r^2 at the turn rate of full rudder
+    delta_r = float(np.radians(rng.uniform(-1.5, 1.5)))
+    speed = float(rng.uniform(*ranges["speed"]))
+    rudder_rate = float(np.radians(rng.uniform(*ranges["rudder_rate"])))
+    rudder_limit = float(np.radians(rng.uniform(*ranges["rudder_limit"])))
     parameters = dict(_EFFECT_TRUTH, K=k_gain, T1=t1, T2=t2, T3=t3, T=t1 + t2 - t3,
-                      alpha=float(rng.uniform(-0.2, 0.5)) / turn_rate ** 2,
-                      delta_r=float(np.radians(rng.uniform(-1.5, 1.5))))
+                      alpha=damping_at_limit / (k_gain * rudder_limit) ** 2, delta_r=delta_r)
     name = f"{kind}(K={k_gain:.3g},T1={t1:.3g},T2={t2:.3g},T3={t3:.3g})"
     return Vessel(name, f"random {kind}: " + ", ".join(f"{k}={parameters[k]:.4g}" for k in
                                                        ("K", "T1", "T2", "T3", "alpha", "delta_r")),
-                  parameters, seed_effects=("rudder_offset", "cubic_yaw"),
-                  speed=float(rng.uniform(*ranges["speed"])),
-                  rudder_rate=float(np.radians(rng.uniform(*ranges["rudder_rate"]))),
-                  rudder_limit=float(np.radians(rng.uniform(*ranges["rudder_limit"]))))
+                  parameters, seed_effects=("rudder_offset", "cubic_yaw"), speed=speed,
+                  rudder_rate=rudder_rate, rudder_limit=rudder_limit)
 
 
 @dataclass(frozen=True)
@@ -163,8 +166,60 @@ def _plan_commands(maneuver: str, vessel: Vessel, duration: float, dt: float,
             hold = int(rng.uniform(2.0, 12.0) / dt)
             cmd[i:i + hold] = rng.uniform(-amp, amp)
             i += hold
+    elif maneuver == "steps":
+        amp = np.radians(25.0) if amplitude is None else amplitude
+        cmd = _held_angles(n, dt, rng, (4.0 * _time_scale(t_eff), 15.0 * _time_scale(t_eff)), (-amp, amp))
+    elif maneuver == "steady_turns":
+        amp = np.radians(25.0) if amplitude is None else amplitude
+        scale = _time_scale(t_eff)
+        cmd = _held_angles(n, dt, rng, (30.0 * scale, 120.0 * scale), (0.2 * amp, amp), alternate=True)
+    elif maneuver == "legs":
+        cmd = _straight_legs(n, dt, rng, k_gain, t_eff, np.radians(10.0) if amplitude is None else amplitude)
     else:
         raise ValueError(f"unknown maneuver {maneuver!r}; choose from {', '.join(MANEUVERS)}")
+    return cmd
+
+
+def _time_scale(t_eff: float) -> float:
+    """How much slower than a 10 s hull the vessel answers (1 for USVs): holds and legs stretch by it."""
+    return max(1.0, t_eff / 10.0)
+
+
+def _held_angles(n: int, dt: float, rng: np.random.Generator, hold_s: tuple, angle: tuple,
+                 alternate: bool = False) -> np.ndarray:
+    """Rudder angles (rad) drawn uniformly in ``angle``, each held for a time drawn in ``hold_s``
+    (s); ``alternate``: every other hold to the other side (turns to port and starboard)."""
+    cmd = np.zeros(n)
+    i, side = 0, 1.0
+    while i < n:
+        hold = max(1, int(rng.uniform(*hold_s) / dt))
+        cmd[i:i + hold] = side * rng.uniform(*angle)
+        side = -side if alternate else side
+        i += hold
+    return cmd
+
+
+def _straight_legs(n: int, dt: float, rng: np.random.Generator, k_gain: float, t_eff: float,
+                   limit: float) -> np.ndarray:
+    """Long straight legs held by a course-keeping autopilot (PD on heading, rudder within
+    ``limit``) against a slowly wandering yaw disturbance (sea and wind, a random walk of
+    0.5 deg of equivalent rudder per sqrt(s)), with course changes of 30-90 deg between legs
+    of 100-300 s (stretched for slow hulls); planned on the first-order model."""
+    scale = _time_scale(t_eff)
+    gain_p = 1.0 / (k_gain * 4.0 * t_eff * scale)  # rad of rudder per rad of heading error
+    gain_d = t_eff * gain_p
+    cmd = np.zeros(n)
+    psi = r = course = disturbance = 0.0
+    next_turn = rng.uniform(100.0, 300.0) * scale
+    disturbance_steps = np.radians(0.5) * np.sqrt(dt) * rng.standard_normal(n)
+    for i in range(n):
+        if i * dt >= next_turn:
+            course += np.radians(rng.uniform(30.0, 90.0)) * rng.choice((-1.0, 1.0))
+            next_turn += rng.uniform(100.0, 300.0) * scale
+        disturbance += disturbance_steps[i]
+        cmd[i] = np.clip(-gain_p * (psi - course) - gain_d * r, -limit, limit)
+        r += dt * (k_gain * (cmd[i] + disturbance) - r) / t_eff
+        psi += dt * r
     return cmd
 
 

@@ -97,10 +97,19 @@ class Structure:
     def initial_parameters(self) -> dict:
         return {p.name: p.initial for p in self.parameters}
 
-    def bounds(self, names=None) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, names=None, dataset: Dataset | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of the parameters ``names``: the physical ones, narrowed with
+        ``dataset`` by every effect's ``data_bounds`` (e.g. cubic_yaw: stable over the turn
+        rates the data reach)."""
         names = self.free_names if names is None else names
-        return (np.array([self.parameter(n).lower for n in names]),
-                np.array([self.parameter(n).upper for n in names]))
+        limits = {n: (self.parameter(n).lower, self.parameter(n).upper) for n in names}
+        if dataset is not None:
+            for effect in self.effects:
+                data_bounds = getattr(effect, "data_bounds", None)
+                for n, (lo, hi) in (data_bounds(dataset) if data_bounds else {}).items():
+                    if n in limits:
+                        limits[n] = (max(lo, limits[n][0]), min(hi, limits[n][1]))
+        return np.array([limits[n][0] for n in names]), np.array([limits[n][1] for n in names])
 
     def check_data(self, dataset: Dataset) -> None:
         if self.needs_speed and dataset.speed is None:

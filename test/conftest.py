@@ -11,10 +11,6 @@ from ship_ident.simulator import simulate
 SHIP_IDENT = Path(sys.executable).parent / "ship-ident"
 
 
-def pytest_configure(config):
-    config.addinivalue_line("markers", "slow: takes more than a few seconds (skipped by make test-fast)")
-
-
 @pytest.fixture(scope="session")
 def ship_ident_cli():
     """``run(*args)``: ``ship-ident ARGS`` as a subprocess with a copy of os.environ (ROS_ON_PIP.md)."""

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from ship_ident import cli
-from ship_ident.diagnose import _fit, diagnose, extrapolation, join_recordings
+from ship_ident.dataset import join_recordings
+from ship_ident.diagnose import _fit, diagnose, extrapolation
 from ship_ident.effects import EFFECTS
 from ship_ident.simulator import simulate
 from ship_ident.structure import Structure

@@ -34,9 +34,12 @@ def test_regressions_recover_gain_and_time_constant_noise_free(clean, method):
     est = make_estimator(method).fit(clean.structure, clean.dataset)
     t = clean.truth
     assert rel(est, t, "K") < 0.01 and rel(est, t, "T1") < 0.02
-    if method != "lssvm":
+    if method == "lssvm":   # the bias swallows the offset's constant column: delta_r is lost (-100 %)
+        assert est.parameters["delta_r"] == 0.0
+    else:
         assert rel(est, t, "delta_r") < 0.01
-    assert all(np.isfinite(v) for v in est.std_errors.values() if method != "lssvm")
+    assert np.isfinite(est.std_errors["K"]) and np.isfinite(est.std_errors["T1"])
+    assert all(np.isfinite(v) for v in est.std_errors.values()) or method == "lssvm"
 
 
 @pytest.mark.parametrize("method", REGRESSIONS)

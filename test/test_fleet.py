@@ -4,8 +4,10 @@ import csv
 
 import pytest
 
-from ship_ident.cli import build_parser
-from ship_ident.fleet import add_fleet_arguments, run_fleet, vessel_of
+from ship_ident.cli import build_parser, main
+from ship_ident.commands.common import topics_from_args
+from ship_ident.commands.replay import config_from_args
+from ship_ident.fleet import FleetError, add_fleet_arguments, run_fleet, vessel_of
 from ship_ident.io import write_simulation
 from ship_ident.simulator import simulate
 
@@ -34,6 +36,12 @@ def fleet_args(bags, *options):
     return fleet.parse_args(list(options), namespace=args)
 
 
+def replay_fleet(args, bags):
+    """What ``ship-ident replay`` does with many bags: topics and configuration from its options."""
+    topics = topics_from_args(args)
+    return run_fleet(args, bags, topics, config_from_args(args, topics, has_speed=True))
+
+
 def read_table(path):
     with open(path) as f:
         return list(csv.DictReader(f))
@@ -42,7 +50,7 @@ def read_table(path):
 @pytest.fixture(scope="module")
 def pool_rows(bags, tmp_path_factory):
     out = tmp_path_factory.mktemp("pool")
-    assert run_fleet(fleet_args(bags, "--jobs", "2", "--table", str(out / "fleet.csv")), bags) == 0
+    assert replay_fleet(fleet_args(bags, "--jobs", "2", "--table", str(out / "fleet.csv")), bags) == 0
     assert sorted(p.name for p in out.glob("drift_*.png")) == ["drift_alpha.png", "drift_bravo.png"]
     return read_table(out / "fleet.csv")
 
@@ -51,6 +59,16 @@ def test_vessel_rules():
     assert vessel_of("/data/alpha/trip0.mcap") == "alpha"
     assert vessel_of("/data/all/alpha_2024-05-01.mcap", "prefix") == "alpha"
     assert vessel_of("/data/hull-bravo/x.mcap", r"hull-(\w+)") == "bravo"
+    with pytest.raises(FleetError, match="no match with a group"):
+        vessel_of("/data/hull-bravo/x.mcap", r"hull-\w+")
+
+
+def test_bad_fleet_options_are_one_line_and_exit_2(bags, capsys):
+    assert main(["replay", bags[0], bags[1], "--jobs", "0"]) == 2
+    err = capsys.readouterr().err
+    assert err == "ship-ident replay: error: --jobs must be >= 1, got 0\n"
+    assert main(["replay", bags[0], bags[1], "--vessel-from", "nothing-(here)"]) == 2
+    assert "--vessel-from 'nothing-(here)' has no match" in capsys.readouterr().err
 
 
 def test_jobs_table_has_rows_per_vessel_matching_truth(pool_rows, bags, capsys):
@@ -66,7 +84,7 @@ def test_jobs_table_has_rows_per_vessel_matching_truth(pool_rows, bags, capsys):
 
 def test_local_dask_cluster_gives_the_same_rows(pool_rows, bags, tmp_path, capsys):
     table = tmp_path / "dask.csv"
-    assert run_fleet(fleet_args(bags, "--dask", "local", "--jobs", "2", "--table", str(table)), bags) == 0
+    assert replay_fleet(fleet_args(bags, "--dask", "local", "--jobs", "2", "--table", str(table)), bags) == 0
     rows = read_table(table)
     assert [(r["vessel"], r["bag"], r["time"]) for r in rows] == \
         [(r["vessel"], r["bag"], r["time"]) for r in pool_rows]
@@ -79,6 +97,6 @@ def test_a_bad_bag_fails_alone(bags, tmp_path, capsys):
     broken = tmp_path / "charlie" / "broken.mcap"
     broken.parent.mkdir()
     broken.write_bytes(b"not a bag")
-    assert run_fleet(fleet_args(bags, "--table", str(tmp_path / "t.csv")), [bags[0], str(broken)]) == 1
+    assert replay_fleet(fleet_args(bags, "--table", str(tmp_path / "t.csv")), [bags[0], str(broken)]) == 1
     assert "FAILED" in capsys.readouterr().err
     assert {row["vessel"] for row in read_table(tmp_path / "t.csv")} == {"alpha"}

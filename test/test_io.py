@@ -9,9 +9,10 @@ from mcap.writer import CompressionType, Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from ship_ident.dataset import DataError
-from ship_ident.io import (BagWriter, Topics, load_dataset, read_samples, typestore, wrap_angle,
-                           write_simulation)
+from ship_ident.dataset import DataError, join_recordings
+from ship_ident.io import (BagWriter, Topics, load_dataset, parse_columns, read_samples, typestore,
+                           wrap_angle, write_simulation)
+from ship_ident.simulator import simulate
 
 FORMATS = {"rosbag2": "bag", "mcap": "run.mcap", "csv": "run.csv"}
 STAMP_OFFSET = 1000.0  # s, header stamps of the Imu test (a zero stamp means "unstamped")
@@ -304,3 +305,85 @@ def test_bad_input_raises_one_clear_data_error(kind, tmp_path, written):
     message = str(caught.value)
     assert BAD_INPUTS[kind] in message
     assert "\n" not in message and str(path.name) in message
+
+
+# --- several recordings, CSV columns by name ------------------------------------------------
+
+def test_joined_recordings_are_named_and_resampled_to_one_step():
+    """Two recordings of different steps: the second is resampled onto the first's 0.1 s, each keeps
+    its own segment, and meta["recordings"] gives each one's name and sample range."""
+    fine = simulate("zigzag10", "seed001", (), duration=30.0, noise=0, seed=1).dataset
+    coarse = simulate("turning", "seed001", (), duration=20.0, sample_time=0.2, noise=0, seed=2).dataset
+    joined = join_recordings([fine, coarse], ["zigzag.csv", "turning.mcap"])
+    n = fine.n_samples
+    assert joined.sample_time == pytest.approx(0.1)
+    assert joined.n_samples == n + 201                       # 20 s at 0.1 s, both ends included
+    assert joined.segments == ((0, n), (n, n + 201))         # never bridged
+    assert joined.meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": n},
+                                         {"name": "turning.mcap", "start": n, "stop": n + 201}]
+    assert np.all(np.diff(joined.time) > 0) and len(joined.gaps) == 1
+    np.testing.assert_array_equal(joined.yaw_rate[:n], fine.yaw_rate)
+    np.testing.assert_allclose(joined.yaw_rate[n::2], coarse.yaw_rate, rtol=0, atol=1e-12)  # 0.2 s samples kept
+    midpoints = 0.5 * (coarse.yaw_rate[:-1] + coarse.yaw_rate[1:])
+    np.testing.assert_allclose(joined.yaw_rate[n + 1::2], midpoints, rtol=0, atol=1e-12)
+    tail = joined.slice(n - 10, joined.n_samples)                 # e.g. a held-out tail
+    assert tail.meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": 10},
+                                       {"name": "turning.mcap", "start": 10, "stop": 211}]
+    assert joined.slice(0, 5).meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": 5}]
+    on_coarse = join_recordings([fine, coarse], sample_time=0.2)
+    assert on_coarse.sample_time == pytest.approx(0.2) and on_coarse.n_samples == (n + 1) // 2 + 101
+
+
+def test_a_single_recording_gets_its_entry_too(written):
+    data = load_dataset(written["mcap"])
+    joined = join_recordings([data])
+    assert joined.meta["recordings"] == [{"name": str(written["mcap"]), "start": 0, "stop": data.n_samples}]
+    assert_same_data(joined, data)
+
+
+SYNONYM_HEADERS = {  # a header of synonyms: the columns in the canonical order t,rudder,heading,yaw_rate,speed
+    "public simulator": "time,delta,psi,r,surge_speed",
+    "units in names": "t_s,rudder_angle,heading_rad,yaw_rate_rad_s,speed_mps",
+    "capitals": "Time,Delta,Yaw,R,U",
+}
+
+
+def renamed_csv(source, header: str, target):
+    lines = source.read_text().splitlines()
+    target.write_text("\n".join([header] + lines[1:]) + "\n")
+    return target
+
+
+@pytest.mark.parametrize("header", SYNONYM_HEADERS.values(), ids=SYNONYM_HEADERS)
+def test_csv_synonyms_are_read_without_options(written, tmp_path, header):
+    path = renamed_csv(written["csv"], header, tmp_path / "renamed.csv")
+    data = load_dataset(path)
+    assert_same_data(data, load_dataset(written["csv"]))    # the speed too: surge_speed is the speed
+    assert data.meta["columns"] == dict(zip(("t", "rudder", "heading", "yaw_rate", "speed"), header.split(",")))
+
+
+def test_csv_columns_by_name(written, tmp_path):
+    path = renamed_csv(written["csv"], "clock,helm,compass,gyro,log", tmp_path / "own.csv")
+    columns = parse_columns("t=clock, rudder=helm,heading=compass,yaw_rate=gyro,speed=log")
+    data = load_dataset(path, Topics(csv_columns=columns))
+    assert_same_data(data, load_dataset(written["csv"]))
+    assert data.meta["columns"]["speed"] == "log"
+
+
+@pytest.mark.parametrize("columns, words", [
+    ("speed=surge", "has no column 'surge'"),
+    ("sped=speed", "unknown role 'sped'"),
+    ("speed", "is not ROLE=COLUMN"),
+    ("speed=log,speed=u", "twice"),
+    ("rudder=heading", "so heading has none"),
+])
+def test_bad_columns_are_one_clear_data_error(written, columns, words):
+    with pytest.raises(DataError) as caught:
+        load_dataset(written["csv"], Topics(csv_columns=parse_columns(columns)))
+    assert words in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_a_csv_without_a_rudder_column_names_what_it_has(written, tmp_path):
+    path = renamed_csv(written["csv"], "t,helm,heading,yaw_rate,speed", tmp_path / "helm.csv")
+    with pytest.raises(DataError, match="no column for rudder; its columns: t, helm, heading"):
+        load_dataset(path)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from ship_ident.jsonio import dumps_json
 from ship_ident.io import ROLES, Sample
-from ship_ident.online import OnlineConfig, OnlineIdentifier, run_schedule
+from ship_ident.online import OnlineConfig, OnlineIdentifier, RefitRecord, run_schedule
 from ship_ident.simulator import simulate
 
 SMALL = OnlineConfig(sample_time=0.1, window_length=10.0, min_window_length=2.0, refit_period=1.0,
@@ -23,21 +23,52 @@ steps = st.one_of(st.floats(0.0, 0.2), st.floats(-3.0, 0.0), st.floats(0.0, 400.
 events = st.lists(st.tuples(steps, st.sampled_from(ROLES + ("refit",)), values), max_size=400)
 
 
-def numbers(value):
-    """Every number in a JSON value."""
+# Top-level fields of a published record that may hold "not known" (NaN before, null after
+# serialisation): the window and the yaw rates before any usable data, an infinite standard error.
+MAY_BE_UNKNOWN = ("window", "predicted_yaw_rate", "measured_yaw_rate", "std_errors")
+
+
+def numbers(value, field=""):
+    """(top-level field, number) for every number in a JSON-like value."""
     if isinstance(value, dict):
-        return [n for v in value.values() for n in numbers(v)]
-    if isinstance(value, list):
-        return [n for v in value for n in numbers(v)]
-    return [value] if isinstance(value, (int, float)) and not isinstance(value, bool) else []
+        return [n for k, v in value.items() for n in numbers(v, field or k)]
+    if isinstance(value, (list, tuple)):
+        return [n for v in value for n in numbers(v, field)]
+    return [(field, value)] if isinstance(value, (int, float)) and not isinstance(value, bool) else []
+
+
+def reject_constant(name):
+    raise AssertionError(f"published JSON holds {name}")
 
 
 def check_published(record) -> None:
-    """What the node would publish: strict JSON with finite numbers, finite parameters."""
-    published = json.loads(dumps_json(record.to_json()))
-    assert all(math.isfinite(n) for n in numbers(published))
-    assert all(v is not None for v in published["parameters"].values())
+    """What the node would publish, checked before serialisation turns NaN into null: the
+    parameters are finite numbers, a non-finite number appears only where "not known" is a legal
+    answer (none at all beside the standard errors when the status is OK), and the text is strict
+    JSON (no NaN or Infinity tokens)."""
+    raw = record.to_json()
+    assert all(isinstance(v, float | int) and math.isfinite(v) for v in raw["parameters"].values())
+    unknown = {field for field, n in numbers(raw) if not math.isfinite(n)}
+    assert unknown <= set(MAY_BE_UNKNOWN), unknown
+    if record.status == "OK":
+        assert unknown <= {"std_errors"}, unknown
+    published = json.loads(dumps_json(raw), parse_constant=reject_constant)
+    assert published["parameters"].keys() == raw["parameters"].keys()
     assert record.status in ("OK", "WARN", "ERROR")
+
+
+def test_check_published_can_fail():
+    """The check itself: a NaN parameter, a NaN fit figure and an OK record without a prediction
+    are each refused."""
+    good = {"parameters": {"K": 0.5, "T": 2.0}, "fit": {"rmse_yaw_rate": 0.01}}
+    check_published(RefitRecord(time=1.0, conditions={}, estimate=good, window=(0.0, 1.0),
+                                predicted_yaw_rate=0.1, measured_yaw_rate=0.1))
+    for estimate, predicted in ((dict(good, parameters={"K": math.nan, "T": 2.0}), 0.1),
+                                (dict(good, fit={"rmse_yaw_rate": math.nan}), 0.1),
+                                (good, math.nan)):
+        with pytest.raises(AssertionError):
+            check_published(RefitRecord(time=1.0, conditions={}, estimate=estimate, window=(0.0, 1.0),
+                                        predicted_yaw_rate=predicted, measured_yaw_rate=0.1))
 
 
 def check_window(identifier: OnlineIdentifier, now: float) -> None:

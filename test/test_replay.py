@@ -1,8 +1,10 @@
 """ship-ident replay: a simulated bag through the online identifier, JSON lines and the --out MCAP."""
 import json
+import math
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from rosbags.highlevel import AnyReader
@@ -113,3 +115,29 @@ def test_replay_bag_is_callable_per_bag(bag):
     assert not result.interrupted and result.duration == pytest.approx(300.0)
     assert [r.time for r in result.records] == pytest.approx([20.0 * k for k in range(1, 16)])
     assert result.records[-1].estimate["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)
+
+
+KVLCC2_ZIGZAG = Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2_marin" / \
+    "MARIN_FREE_KVLCC2_zz_20_m.csv"
+
+
+@pytest.mark.skipif(not KVLCC2_ZIGZAG.exists(), reason="kvlcc2_marin: measured MARIN model tests, "
+                                                        "not shipped with the package")
+def test_kvlcc2_zigzag_uncertainty_covers_the_scatter_and_is_not_saturated():
+    """The measured 20/20 zigzag of a slow ship: successive published K within 3 joint standard
+    errors of each other (they were 12-19 apart), no rudder_saturated for the zigzag's +-20 deg,
+    and a 1 s sample time runs (the gap threshold follows it)."""
+    args = [KVLCC2_ZIGZAG, "--json", "--model", "nomoto1", "--effects", "cubic_yaw", "--window-length", 400,
+            "--refit-period", 20]
+    out = replay(*args, "--sample-time", 0.5)
+    assert out.returncode == 0, out.stderr
+    records = [json.loads(line) for line in out.stdout.splitlines()]
+    published = [(r["parameters"]["K"], r["std_errors"]["K"]) for r in records if r["new_estimate"]]
+    assert len(published) >= 5
+    apart = [abs(k2 - k1) / math.hypot(s1, s2) for (k1, s1), (k2, s2) in zip(published, published[1:])]
+    assert max(apart) < 3.0, apart
+    assert not any("rudder_saturated" in r["conditions"] for r in records)
+    coarse = replay(*args, "--sample-time", 1)
+    assert coarse.returncode == 0 and any(json.loads(line)["new_estimate"] for line in coarse.stdout.splitlines())
+    bad = replay(*args, "--sample-time", 1, "--gap-threshold", 0.5)
+    assert bad.returncode == 2 and "gap_threshold must be 0" in bad.stderr

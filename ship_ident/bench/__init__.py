@@ -30,7 +30,7 @@ class Benchmark:
 
 
 _REGISTRY: dict[str, Benchmark] = {}
-HELPERS = {"crb", "common"}  # modules here that are no benchmark
+HELPERS = {"crb", "common", "peer_models", "peer_experiments", "peer_rendering"}  # modules here that are no benchmark
 
 
 def register(name: str, description: str, run: Callable[..., dict], render: Callable[[dict], str],

@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
-from ..dataset import Dataset
+from ..dataset import Dataset, join_recordings
 from ..estimators import DEFAULT_METHOD, method_names
-from ..io import Topics, load_dataset
+from ..io import Topics, is_canonical, load_dataset, parse_columns
 from ..structure import Structure, parse_effects
 
 DEFAULT_TOPICS = Topics()
@@ -23,27 +24,64 @@ def add_data_args(parser: argparse.ArgumentParser) -> None:
                             "Float64 topics")
     group.add_argument("--sample-time", type=float, default=0.1, metavar="S",
                        help="resampling step in s (default %(default)s)")
+    group.add_argument("--columns", default="", metavar="ROLE=NAME,...",
+                       help="CSV columns by name, e.g. speed=surge_speed,rudder=delta (roles t, rudder, "
+                            "heading, yaw_rate, speed; SI units); without it the canonical names and "
+                            "common synonyms (surge_speed, u; delta; psi, yaw; r; time) are recognised")
 
 
 def topics_from_args(args: argparse.Namespace) -> Topics:
     return Topics(rudder=args.rudder_topic, heading=args.heading_topic,
-                  yaw_rate=args.yaw_rate_topic, speed=args.speed_topic, imu=args.imu_topic)
+                  yaw_rate=args.yaw_rate_topic, speed=args.speed_topic, imu=args.imu_topic,
+                  csv_columns=parse_columns(args.columns))
 
 
 def load_data(args: argparse.Namespace, path) -> Dataset:
-    """The Dataset of a bag or CSV file, read with the topics and sample time of ``args``."""
-    return load_dataset(path, topics_from_args(args), args.sample_time)
+    """The Dataset of a bag or CSV file, read with the topics, columns and sample time of ``args``;
+    a CSV column mapping other than the canonical one is said on stderr (one line)."""
+    dataset = load_dataset(path, topics_from_args(args), args.sample_time)
+    say_columns(args, path, dataset.meta.get("columns"))
+    return dataset
 
 
-def add_model_args(parser: argparse.ArgumentParser, method: bool = True) -> None:
-    """``--model``, ``--effects`` and (optionally) ``--method``."""
-    parser.add_argument("--model", default="nomoto2", choices=("nomoto1", "nomoto2"),
-                        help="base Nomoto model (default %(default)s)")
+def say_columns(args: argparse.Namespace, path, mapping: dict | None) -> None:
+    """One stderr line naming the CSV columns read, when they are not the canonical names."""
+    if mapping and not is_canonical(mapping):
+        pairs = ",".join(f"{role}={column}" for role, column in mapping.items())
+        print(f"ship-ident {args.command}: {path}: reading columns {pairs}", file=sys.stderr)
+
+
+def load_recordings(args: argparse.Namespace, paths) -> Dataset:
+    """Several bags or CSV files as one Dataset on ``--sample-time``, each recording its own
+    segment(s), never bridged; ``meta["recordings"]`` names each one's sample range."""
+    return join_recordings([load_data(args, path) for path in paths], [str(p) for p in paths],
+                           args.sample_time)
+
+
+def add_recordings_arg(parser: argparse.ArgumentParser, name: str = "data") -> None:
+    """One or more recordings fitted (or judged) together."""
+    parser.add_argument(name, metavar="DATA", nargs="+",
+                        help="rosbag2 directories, .mcap files or CSV files; several recordings make "
+                             "one dataset, each its own segment (never bridged)")
+
+
+def sources(paths) -> str:
+    """The recordings' names for a heading line: ``a.csv`` or ``a.csv + b.mcap``."""
+    return " + ".join(str(p) for p in paths)
+
+
+def add_model_args(parser: argparse.ArgumentParser, method: bool = True, threedof: bool = False) -> None:
+    """``--model``, ``--effects`` and (optionally) ``--method``; with ``threedof`` the model may be
+    seed 000's ``3dof`` (its --method defaults to tlssvm, so an unset --method is None)."""
+    parser.add_argument("--model", default="nomoto2", choices=("nomoto1", "nomoto2") + (("3dof",) if threedof else ()),
+                        help="base model (default %(default)s)" + ("; 3dof: seed 000's surge-sway-yaw model"
+                                                                   if threedof else ""))
     parser.add_argument("--effects", default="", metavar="A,B",
                         help="comma-separated effects, e.g. rudder_offset,cubic_yaw (default: none)")
     if method:
-        parser.add_argument("--method", default=DEFAULT_METHOD, metavar="NAME",
-                            help=f"estimator: {', '.join(method_names())} (default %(default)s)")
+        parser.add_argument("--method", default=None if threedof else DEFAULT_METHOD, metavar="NAME",
+                            help=f"estimator: {', '.join(method_names())} (default {DEFAULT_METHOD}"
+                                 + ("; with --model 3dof: tlssvm or ols, default tlssvm)" if threedof else ")"))
 
 
 def structure_from_args(args: argparse.Namespace) -> Structure:

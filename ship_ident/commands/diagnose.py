@@ -5,10 +5,11 @@ import math
 import sys
 import time
 
-from ..diagnose import DEFAULT_METHOD, covered, diagnose, join_recordings
+from ..diagnose import DEFAULT_METHOD, covered, diagnose
 from ..structure import parse_effects, require_samples
 from ..jsonio import dumps_json
-from .common import add_data_args, add_json_arg, add_model_args, load_data
+from .common import add_data_args, add_json_arg, add_model_args, add_recordings_arg, load_recordings, sources
+from .identify import data_field
 
 DEG = math.degrees(1.0)
 
@@ -20,7 +21,7 @@ def add_parser(subparsers) -> None:
                     "show the worst segments and residual tests, and refit with every effect not "
                     "yet in the model to rank what is missing. With --effects, the error before "
                     "and after the last listed effect is shown.")
-    parser.add_argument("data", metavar="DATA", help="rosbag2 directory, .mcap file or CSV file")
+    add_recordings_arg(parser)
     add_model_args(parser)
     parser.set_defaults(method=DEFAULT_METHOD)
     parser.add_argument("--validate", metavar="OTHER", action="append",
@@ -41,21 +42,21 @@ def run(args) -> int:
     def progress(message: str) -> None:
         print(f"diagnose [{time.monotonic() - start:5.1f} s]: {message}", file=sys.stderr, flush=True)
 
-    dataset = load_data(args, args.data)
+    dataset = load_recordings(args, args.data)
     require_samples(dataset)
-    validation = join_recordings([load_data(args, path) for path in args.validate]) if args.validate else None
+    validation = load_recordings(args, args.validate) if args.validate else None
     result = diagnose(dataset, args.model, parse_effects(args.effects), args.method,
                       progress=progress, workers=args.workers, validation=validation)
     if args.report:
         from ..report import write_report
         progress(f"writing the report to {args.report}")
         held_out = f" (held out: {', '.join(args.validate)})" if args.validate else ""
-        path = write_report(result, args.report, source=f"{args.data}{held_out}")
+        path = write_report(result, args.report, source=f"{sources(args.data)}{held_out}")
         progress(f"report: {path}")
-    record = dict(result.to_json(), data=str(args.data), validate=list(args.validate or ()))
+    record = dict(result.to_json(), data=data_field(args.data), validate=list(args.validate or ()))
     options = "".join([f" --validate {v}" for v in args.validate or ()]
                       + [f" --sample-time {args.sample_time:g}"])
-    print(dumps_json(record) if args.json else format_diagnosis(result, args.data, options))
+    print(dumps_json(record) if args.json else format_diagnosis(result, " ".join(args.data), options))
     return 0
 
 

@@ -5,39 +5,49 @@ import math
 from pathlib import Path
 
 from ..errors import CommandError
-from ..estimators import make_estimator
+from ..estimators import DEFAULT_METHOD, make_estimator
 from ..estimators.base import excitation_shortfall
 from ..structure import require_samples
 from ..jsonio import dumps_json
-from .common import add_data_args, add_json_arg, add_model_args, load_data, structure_from_args
+from .common import (add_data_args, add_json_arg, add_model_args, add_recordings_arg, load_recordings,
+                     sources, structure_from_args)
+from .threedof import add_threedof_args, run_identify
 
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "identify", help="identify a Nomoto model from a bag or CSV file",
-        description="Fit a Nomoto model (plus effects) to recorded or simulated data and report "
-                    "parameters, standard errors and the free-run fit.")
-    parser.add_argument("data", metavar="DATA", help="rosbag2 directory, .mcap file or CSV file")
-    add_model_args(parser)
+        "identify", help="identify a Nomoto (or 3-DOF) model from bags or CSV files",
+        description="Fit a Nomoto model (plus effects), or seed 000's 3-DOF model, to recorded or "
+                    "simulated data and report parameters, standard errors and the free-run fit.")
+    add_recordings_arg(parser)
+    add_model_args(parser, threedof=True)
     parser.add_argument("--save", metavar="MODEL.json", help="write the estimate as a model file "
                         "for `ship-ident compare`")
     add_json_arg(parser)
     add_data_args(parser)
+    add_threedof_args(parser)
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
+    if args.model == "3dof":
+        return run_identify(args)
     structure = structure_from_args(args)
-    estimator = make_estimator(args.method)
-    dataset = load_data(args, args.data)
+    estimator = make_estimator(args.method or DEFAULT_METHOD)
+    dataset = load_recordings(args, args.data)
     require_samples(dataset)
     require_excitation(dataset)
     estimate = estimator.fit(structure, dataset)
-    record = dict(estimate.to_json(), data=str(args.data))
+    record = dict(estimate.to_json(), data=data_field(args.data), recordings=dataset.meta["recordings"])
     if args.save:
         Path(args.save).write_text(dumps_json(record, indent=2) + "\n")
-    print(dumps_json(record) if args.json else format_estimate(estimate, args.data))
+    print(dumps_json(record) if args.json else format_estimate(estimate, sources(args.data)))
     return 0
+
+
+def data_field(paths) -> str | list[str]:
+    """The JSON ``data`` field: the one path, or the list of paths fitted together."""
+    return str(paths[0]) if len(paths) == 1 else [str(p) for p in paths]
 
 
 def require_excitation(dataset) -> None:

@@ -14,6 +14,8 @@ from ..errors import CommandError
 from ..io import write_simulation
 from ..simulator import MANEUVERS, VESSELS, simulate
 from ..structure import parse_effects
+from ..threedof import VESSELS as THREEDOF_VESSELS
+from .threedof import add_threedof_args, run_simulate
 
 FORMATS = ("rosbag2", "mcap", "csv")
 MIN_SAMPLE_TIME = 0.01  # s, the simulator's internal integration step
@@ -29,7 +31,11 @@ def add_parser(subparsers) -> None:
                         help="output: rosbag2 directory, .mcap file or .csv file")
     parser.add_argument("--format", choices=FORMATS,
                         help="output format (default: from the --out suffix, .mcap, .csv, else rosbag2)")
-    parser.add_argument("--vessel", default="seed001", choices=sorted(VESSELS))
+    parser.add_argument("--model", default="nomoto2", choices=("nomoto2", "3dof"),
+                        help="simulated model (default %(default)s); 3dof: seed 000's surge-sway-yaw model "
+                             "(manoeuvres zigzag10, zigzag20, turning; vessel dtc)")
+    parser.add_argument("--vessel", default=None, choices=sorted(VESSELS) + sorted(THREEDOF_VESSELS),
+                        help="vessel preset (default seed001; with --model 3dof: dtc)")
     parser.add_argument("--effects", default=None, metavar="A,B",
                         help="effects in the true model (default: the vessel's own; '' for none)")
     parser.add_argument("--noise", type=float, default=1.0, metavar="FACTOR",
@@ -39,7 +45,9 @@ def add_parser(subparsers) -> None:
                         help="duration in s (default %(default)s)")
     parser.add_argument("--sample-time", type=float, default=0.1, metavar="S",
                         help="sample time in s (default %(default)s)")
-    parser.add_argument("--truth-out", metavar="FILE", help="write the true model as JSON to FILE")
+    parser.add_argument("--truth-out", metavar="FILE", help="write the true model as JSON to FILE "
+                        "(with --model 3dof a model file for `compare`)")
+    add_threedof_args(parser, fitting=False)
     parser.set_defaults(func=run)
 
 
@@ -56,10 +64,16 @@ def run(args) -> int:
                            "(the simulator's internal step) and --noise >= 0")
     if Path(args.out).exists():
         raise CommandError(f"{args.out} exists already; remove it or choose another --out")
-    effects = None if args.effects is None else parse_effects(args.effects)
-    sim = simulate(args.maneuver, args.vessel, effects, duration=args.duration,
-                   sample_time=args.sample_time, noise=args.noise, seed=args.seed)
     fmt = output_format(args.out, args.format)
+    if args.model == "3dof":
+        return run_simulate(args, fmt)
+    vessel = args.vessel or "seed001"
+    if vessel not in VESSELS:
+        raise CommandError(f"the vessel {vessel!r} has a 3dof model only; add --model 3dof or choose "
+                           f"{', '.join(sorted(VESSELS))}")
+    effects = None if args.effects is None else parse_effects(args.effects)
+    sim = simulate(args.maneuver, vessel, effects, duration=args.duration,
+                   sample_time=args.sample_time, noise=args.noise, seed=args.seed)
     write_simulation(sim, args.out, fmt)
     if args.truth_out:
         Path(args.truth_out).write_text(json.dumps(sim.truth_json(), indent=2) + "\n")

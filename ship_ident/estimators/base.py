@@ -23,7 +23,9 @@ from ..structure import Regression, Structure
 
 MIN_RUDDER_STD = np.radians(1.0)   # rad: below this the rudder does not excite the hull
 MIN_YAW_RATE_STD = np.radians(0.02)  # rad/s: an absolute floor under the noise-relative need
-MIN_YAW_RATE_SNR = 5.0                # yaw-rate std needed, in multiples of the sensor noise
+HARDLY_MOVES_SNR = 2.0                # yaw-rate std below this many noise levels: it hardly moves
+# Relative standard errors (std / |value|) above which a window does not determine a parameter.
+MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3}
 
 
 @dataclass
@@ -72,26 +74,45 @@ class Estimate:
 
 
 def excitation(dataset: Dataset) -> dict:
-    """Rudder and yaw-rate activity of a dataset (rad, rad/s), and the yaw-rate activity needed:
-    five times the yaw-rate sensor noise, so that a slow large ship is judged by its own noise."""
+    """Rudder and yaw-rate activity of a dataset (rad, rad/s), and the yaw-rate activity below which
+    the yaw rate hardly moves: twice its sensor noise (the spread is then mostly noise)."""
     return {"rudder_std": float(np.std(dataset.rudder)),
             "yaw_rate_std": float(np.std(dataset.yaw_rate)),
-            "yaw_rate_std_needed": max(MIN_YAW_RATE_SNR * noise_level(dataset.yaw_rate, 0.0),
+            "yaw_rate_std_needed": max(HARDLY_MOVES_SNR * noise_level(dataset.yaw_rate, 0.0),
                                        MIN_YAW_RATE_STD)}
 
 
-def excitation_shortfall(dataset: Dataset) -> str | None:
-    """Why the data cannot support an estimate (a sentence with degrees), or None."""
+def excitation_shortfall(dataset: Dataset, parameters: dict | None = None,
+                         std_errors: dict | None = None) -> str | None:
+    """Why the data cannot support an estimate (a sentence with the figures), or None.
+
+    Without an estimate only the floors apply: a rudder that hardly moves, a yaw rate whose spread
+    is mostly its noise. With an estimate's parameters and standard errors, the data are judged by
+    what they determine: the gain and the main time constant within MAX_RELATIVE_ERRORS of their
+    values, whatever the yaw-rate spread."""
     ex = excitation(dataset)
-    if ex["rudder_std"] >= MIN_RUDDER_STD and ex["yaw_rate_std"] >= ex["yaw_rate_std_needed"]:
+    if ex["rudder_std"] < MIN_RUDDER_STD or ex["yaw_rate_std"] < ex["yaw_rate_std_needed"]:
+        moves = "the rudder hardly moves" if ex["rudder_std"] < MIN_RUDDER_STD else "the yaw rate hardly moves"
+        return (f"too little excitation ({moves}): rudder std {np.degrees(ex['rudder_std']):.2f} deg "
+                f"(need {np.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
+                f"deg/s (need {np.degrees(ex['yaw_rate_std_needed']):.3f}, twice its noise)")
+    if parameters is None or std_errors is None:
         return None
-    return (f"too little excitation: rudder std {np.degrees(ex['rudder_std']):.2f} deg "
-            f"(need {np.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
-            f"deg/s (need {np.degrees(ex['yaw_rate_std_needed']):.3f}, five times its noise)")
+    relative = {name: std_errors.get(name, np.inf) / max(abs(parameters[name]), 1e-12)
+                for name in MAX_RELATIVE_ERRORS if name in parameters}
+    loose = {name: r for name, r in relative.items() if not r <= MAX_RELATIVE_ERRORS[name]}
+    if not loose:
+        return None
+    figures = ", ".join(f"{name} {parameters[name]:.4g} +- {std_errors.get(name, np.inf):.2g} "
+                        f"({100 * r:.0f} %, need <= {100 * MAX_RELATIVE_ERRORS[name]:.0f} %)"
+                        for name, r in loose.items())
+    return (f"the window does not determine {', '.join(loose)}: {figures}; rudder std "
+            f"{np.degrees(ex['rudder_std']):.2f} deg, yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} deg/s")
 
 
-def excitation_flags(dataset: Dataset) -> list[str]:
-    return ["low_excitation"] if excitation_shortfall(dataset) else []
+def excitation_flags(dataset: Dataset, parameters: dict | None = None,
+                     std_errors: dict | None = None) -> list[str]:
+    return ["low_excitation"] if excitation_shortfall(dataset, parameters, std_errors) else []
 
 
 def fit_substeps(h: float, params: dict) -> int:

@@ -31,6 +31,16 @@ Newey-West (sandwich) ones, honest under the residual autocorrelation that
 remains (``parameter_std_errors``). Residuals beyond 5 robust standard
 deviations of the start's residual get Huber weights, so that sensor spikes
 do not drag the fit.
+
+The bounds are the physical ones narrowed by the data (``Structure.bounds``:
+cubic_yaw keeps the model stable over the turn rates the window reaches). A
+nomoto2 search that has not converged in ``max_iterations`` while its T2 is
+still at the foot of the T2 = T3 valley and its residuals near the noise
+(``_valley_starts``) looks along that valley and goes on with a gentler damping
+rule for up to twice as many iterations; any other search ends as it did. A
+parameter within 1 % of a physical bound is reported ``at_bound`` (T1 = 999 s of 1000 s
+is a search that ran off along the K, T1, alpha -> infinity ridge of a window
+no model fits, not a hull).
 """
 from __future__ import annotations
 
@@ -48,6 +58,11 @@ from .base import Estimate, Estimator, finish_estimate, fit_substeps
 MAX_INTERVALS = 64          # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
 MIN_INTERVAL_SAMPLES = 50   # shorter intervals are not split further
+VALLEY_SHARES = (0.03, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the starts along the T2 = T3 valley (nomoto2)
+AT_BOUND_SHARE = 0.01       # within 1 % of a bound's value is on it (T1 = 999 s of 1000 s: a search
+                             # running off along the K, T1, alpha -> infinity ridge, not a hull)
+RESCUE_ITERATIONS_FACTOR = 2  # a search not converged in max_iterations goes on this many times longer
+RESCUE_MAX_COST = 4.0         # ... when its mean squared residual is within this many noise variances
 SPARSE_INTERVALS = 12       # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
 
 
@@ -73,7 +88,7 @@ class LeastSquaresResult:
 
 
 def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterations: int,
-                                tolerance: float = 1e-6) -> LeastSquaresResult:
+                                tolerance: float = 1e-6, gentle: bool = False) -> LeastSquaresResult:
     """Levenberg-Marquardt with Marquardt's diagonal scaling on the normal equations, bounds by
     projection (a parameter at a bound whose gradient points outward is held there).
 
@@ -81,8 +96,12 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
     Jacobian's simulations and almost nothing else (``jacobian`` may return a scipy sparse
     matrix). It stops when a step gains less than ``tolerance`` of the cost (far below the chi-square scatter of the cost, 1/sqrt(N)) or less
     than ``CHI_SQUARE_TOLERANCE``: the residuals are in noise units, so such a step moves the
-    parameters by a tenth of a standard error or less.
+    parameters by a tenth of a standard error or less. The damping lam grows tenfold on a
+    rejected step and shrinks tenfold on an accepted one; ``gentle`` (for a search that crawls
+    along a curved valley, where lam then swings between a rejected and a needlessly small
+    step) doubles it on rejections (x2, x4, ...) and shrinks it threefold (Nielsen's rule).
     """
+    grow_first, shrink = (2.0, 3.0) if gentle else (10.0, 10.0)
     x = np.clip(np.asarray(x0, dtype=float), lower, upper)
     f = residual(x)
     cost = float(f @ f)
@@ -93,12 +112,13 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         d = np.maximum(np.diag(A)[free], 1e-12)
         improved = False
-        for _ in range(12):
+        grow = grow_first
+        for _ in range(24 if gentle else 12):
             step = np.zeros_like(x)
             try:
                 step[free] = np.linalg.solve(A[np.ix_(free, free)] + lam * np.diag(d), -g[free])
             except np.linalg.LinAlgError:
-                lam *= 10.0
+                lam *= grow
                 continue
             x_new = np.clip(x + step, lower, upper)
             f_new = residual(x_new)
@@ -106,14 +126,15 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
             if cost_new < cost:
                 improved = True
                 break
-            lam *= 10.0
+            lam *= grow
+            grow = grow * 2.0 if gentle else grow
         if not improved:
             converged = True   # no descent left at this precision
             break
         small_step = np.all(np.abs(x_new - x) <= tolerance * (np.abs(x) + 1e-3))
         small_gain = cost - cost_new <= max(tolerance * cost, CHI_SQUARE_TOLERANCE)
         x, f, cost = x_new, f_new, cost_new
-        lam = max(lam / 10.0, 1e-9)
+        lam = max(lam / shrink, 1e-9)
         J = jacobian(x, f)
         if small_step or small_gain:
             converged = True
@@ -212,13 +233,41 @@ class OutputError(Estimator):
                 conservative[i] = structure.parameter(name).initial
         return [x0, conservative]
 
+    @staticmethod
+    def _in_valley_foot(names: list, x: np.ndarray) -> bool:
+        """T2 below the smallest valley share of T1: where a search up the T2 = T3 valley
+        starts its crawl (nomoto2 only)."""
+        return "T2" in names and x[names.index("T2")] < VALLEY_SHARES[0] * x[names.index("T1")]
+
+    @staticmethod
+    def _valley_starts(names: list, x: np.ndarray) -> list:
+        """Variants of the start ``x`` along the T2 = T3 valley of nomoto2 (none for nomoto1).
+
+        When T3 is close to T2 the zero cancels the fast pole and the response is nearly
+        first order in T1: the cost is almost flat along T2 - T3 = const, and a search that
+        starts with both near zero (as smoothed regressions often give) crawls up that curved
+        valley, lam swinging between a rejected and a needlessly small step, for 50-100
+        iterations (boats of issue 13's ranges: 30 iterations ended oe_not_converged with T2 at
+        0.02-0.06 s of 0.9-1.3 s). Variants with T2 at 3-50 % of T1 (``VALLEY_SHARES``) and the
+        start's T3 - T2 (so T1 + T2 - T3 is kept) are tried before the search goes on gently."""
+        if "T2" not in names or "T3" not in names:
+            return []
+        t1, t2, t3 = names.index("T1"), names.index("T2"), names.index("T3")
+        out = []
+        for share in VALLEY_SHARES:
+            valley = x.copy()
+            valley[t2] = share * x[t1]
+            valley[t3] = max(valley[t2] + x[t3] - x[t2], 0.0)
+            out.append(valley)
+        return out
+
     def refine(self, structure: Structure, dataset: Dataset, first: Estimate, starts=()) -> Estimate:
         """Minimise the free-run error from ``first`` (and its conservative variant) or from any of
         ``starts`` (further parameter sets, e.g. the fit of the model without its last effect),
         whichever simulates closest to the data."""
         names = structure.free_names
         p = len(names)
-        lower, upper = structure.bounds(names)
+        lower, upper = structure.bounds(names, dataset)
         params0 = structure.clip_to_bounds(first.parameters)
         h = dataset.sample_time
         s_psi = noise_level(dataset.heading, np.radians(0.01))
@@ -296,23 +345,47 @@ class OutputError(Estimator):
         points = [np.clip(np.concatenate([g, states0.ravel()]), lo, hi) for g in guesses]
         substeps = max(fit_substeps(h, unpack(x)[0]) for x in points)
         x0 = points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))]
+
+        def along_valley(x):
+            """The best of ``x`` and its variants along the T2 = T3 valley, each with the yaw
+            accelerations of the intervals' starts back at zero (the ones fitted with a small T2
+            mean nothing with a larger one)."""
+            variants = self._valley_starts(names, x[:p])
+            if not variants:
+                return x
+            states = x[p:].copy()
+            states[2::n_state] = states0[:, 2]
+            points = [x] + [np.clip(np.concatenate([g, states]), lo, hi) for g in variants]
+            substeps = max(fit_substeps(h, unpack(q)[0]) for q in points)
+            return points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))]
+
         robust = huber_weights(residual(x0), dataset.n_samples)
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
+        iterations = result.iterations
+        if (not result.success and self._in_valley_foot(names, result.x[:p])
+                and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun)):
+            # a model that explains the data to near its noise, crawling up the T2 = T3 valley from
+            # its foot: jump along it and search on gently (a model that misses the motion,
+            # residuals far above the noise, is not helped by more search)
+            result = bounded_levenberg_marquardt(residual, jacobian, along_valley(result.x), lo, hi,
+                                                 RESCUE_ITERATIONS_FACTOR * self.max_iterations, gentle=True)
+            iterations += result.iterations
         params, _ = unpack(result.x)
         std = parameter_std_errors(result.jac, result.fun, dataset.n_samples, p,
                                    bandwidth=self.bandwidth(intervals))
         std_errors = {n: float(s) for n, s in zip(names, std)}
         std_errors.update({n: 0.0 for n in structure.fixed_names})
         flags = [f for f in first.flags if not f.endswith("_out_of_bounds") and not f.startswith("at_bound:")
-                 and f != "complex_time_constants"]
-        at_bound = [n for n, v, l, u in zip(names, result.x, lower, upper)
-                    if (np.isfinite(l) and np.isclose(v, l, atol=1e-6 * max(1, abs(l))))
-                    or (np.isfinite(u) and np.isclose(v, u, atol=1e-6 * max(1, abs(u))))]
+                 and f not in ("complex_time_constants", "diverged")]  # the start's, not this fit's
+        physical = structure.bounds(names)  # the data's stability limit of alpha is no physical bound
+        at_bound = [n for n, v, l, u in zip(names, result.x, *physical)
+                    if any(np.isfinite(b) and np.isclose(v, b, rtol=AT_BOUND_SHARE, atol=1e-6 * max(1, abs(b)))
+                           for b in (l, u))]
         flags += [f"at_bound:{n}" for n in at_bound]
         if not result.success:
             flags.append("oe_not_converged")
         info = {"start": first.method, "start_parameters": first.parameters,
-                "noise_heading": s_psi, "noise_yaw_rate": s_r, "iterations": result.iterations,
+                "noise_heading": s_psi, "noise_yaw_rate": s_r, "iterations": iterations,
                 "simulations": simulations,
                 "shooting_intervals": len(intervals), "shooting_s": self.shooting_s,
                 "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),

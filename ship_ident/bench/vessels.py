@@ -1,0 +1,340 @@
+"""``vessels``: the online identifier on randomised vessels, judged against their truth.
+
+Each case draws a vessel with ``simulator.random_vessel`` (quick USVs to slow
+ships), a manoeuvre (random rudder steps of +-25 deg held 4-15 s, 10/10 and
+20/20 zigzags, steady turns with the rudder held 30-120 s, long straight
+legs under an autopilot, the mixed manoeuvre; holds and legs stretch with
+the hull's time constant), a sensor-noise level of 0.5-3x the realistic one
+(``simulator.Noise``), and either a steady vessel or one whose K falls 30 %
+and T1 grows 30 % halfway through. The record is replayed through the
+node's online core exactly as ``ship-ident replay`` does (``OnlineIdentifier``
++ ``run_schedule``, the node's defaults) for USVs; a slow ship gets a
+configuration that follows its hull (``config_for``). Case ``i`` of seed
+``S`` is drawn from seed ``S + i`` alone, so ``--seed S+i --count 1``
+replays it.
+
+Figures, all against the simulated truth:
+
+* coverage: the share of published OK estimates (a new estimate, status OK)
+  whose 95 % interval (1.96 std errors) holds the truth, per parameter;
+* on steady vessels, the worst K and T1 error of a published OK estimate and
+  the share more than 10 % off;
+* rejected refits on well-excited windows: a window is well excited when its
+  Cramer-Rao bound (``crb.py``, with the record's rudder noise) puts K within
+  ``WELL_EXCITED['K']`` and T1 within ``WELL_EXCITED['T1']`` (relative std),
+  whatever its signal-to-noise ratios; any refit there that does not give a
+  new OK estimate is rejected, and its conditions are counted;
+* after the step change: the time until the K in force is back within 5 %
+  of the new truth and stays there (``peers.recovery_time``), median, worst,
+  and the share beyond one window plus one refit period; the K error before
+  the change (RMS over the last two thirds of a window);
+* false ``vessel_changed`` per hour of steady data.
+"""
+from __future__ import annotations
+
+import math
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from ..dataset import Dataset
+from ..online import OnlineConfig, OnlineIdentifier, run_schedule
+from ..simulator import Noise, random_vessel, simulate
+from . import progress, register
+from .common import table
+from .crb import cramer_rao_bound
+from .peers import RECOVERY_TOLERANCE, dataset_samples, recovery_time
+
+DEFAULTS = OnlineConfig()
+PARAMETERS = DEFAULTS.structure().parameter_names
+MANEUVER_CHOICES = ("steps", "steps", "zigzag10", "zigzag20", "steady_turns", "legs", "mixed")
+NOISE_RANGE = (0.5, 3.0)             # multiples of the realistic sensor noise
+STEP_SHARE = 0.5                     # share of cases with a change mid-run
+CHANGE = {"K": 0.7, "T1": 1.3}       # factors on the truth at the change
+WINDOWS_PER_RUN = 5.0                # run length in windows (quick: 3); a change at half of it
+WELL_EXCITED = {"K": 0.02, "T1": 0.05}  # CRB relative std at most this: the data determine K and T1
+OFF_TOLERANCE = 0.10                 # a published OK estimate this far off the truth is wrong
+MAX_SCALE = 10.0                     # a ship's window is at most 10 node windows (1800 s)
+DEFAULT_COUNT, QUICK_COUNT = 60, 6
+WORKERS = 2
+
+
+def config_for(vessel) -> OnlineConfig:
+    """The online configuration of a case: the node's defaults for a USV; for a slow ship, the
+    defaults stretched by f = 30 T1 / 180 s within [1, 10] (window about 30 T1, at most 1800 s;
+    sample time, refit period and first-fit length by the same factor, the sample time at most
+    1 s; gap threshold five sample times)."""
+    if not vessel.name.startswith("ship"):
+        return DEFAULTS
+    scale = float(np.clip(30.0 * vessel.parameters["T1"] / DEFAULTS.window_length, 1.0, MAX_SCALE))
+    sample_time = min(1.0, round(DEFAULTS.sample_time * scale, 2))
+    return DEFAULTS.changed(window_length=DEFAULTS.window_length * scale,
+                            refit_period=DEFAULTS.refit_period * scale,
+                            min_window_length=DEFAULTS.min_window_length * scale,
+                            sample_time=sample_time, gap_threshold=5 * sample_time)
+
+
+def draw_case(seed: int, quick: bool = False) -> dict:
+    """Vessel, manoeuvre, noise and change of the case with this seed (nothing simulated yet)."""
+    rng = np.random.default_rng(seed)
+    vessel = random_vessel(rng)
+    maneuver = str(rng.choice(MANEUVER_CHOICES))
+    noise = float(rng.uniform(*NOISE_RANGE))
+    step = bool(rng.uniform() < STEP_SHARE)
+    config = config_for(vessel)
+    duration = config.window_length * (3.0 if quick else WINDOWS_PER_RUN)
+    return {"seed": seed, "vessel": vessel, "maneuver": maneuver, "noise": noise, "step": step,
+            "config": config, "duration": duration, "change_time": duration / 2 if step else None}
+
+
+def run_case(seed: int, quick: bool = False) -> dict:
+    """Simulate the case, replay it through the online core and judge every refit (plain data)."""
+    case = draw_case(seed, quick)
+    vessel, config = case["vessel"], case["config"]
+    noise = Noise().scaled(case["noise"])
+    change = None
+    if case["step"]:
+        change = (case["change_time"], {k: f * vessel.parameters[k] for k, f in CHANGE.items()})
+    sim = simulate(case["maneuver"], vessel, duration=case["duration"], sample_time=config.sample_time,
+                   noise=noise, seed=seed, change=change)
+    truth_after = sim.info.get("truth_after", sim.truth)
+    refits = []
+    identifier = OnlineIdentifier(config)
+    for record in run_schedule(identifier, dataset_samples(sim.dataset)):
+        if "window_filling" in record.conditions or "no_data" in record.conditions:
+            continue
+        data = record.to_json()
+        start = max(record.time - config.window_length, 0.0)
+        regime = _regime(start, record.time, case["change_time"])
+        estimate_window = data["estimate_window"] or {}
+        refits.append({
+            "time": record.time, "status": data["status"], "new": data["new_estimate"],
+            "conditions": sorted(data["conditions"]), "parameters": data["parameters"],
+            "std_errors": data["std_errors"],
+            "estimate_regime": _regime(estimate_window.get("start", math.nan),
+                                       estimate_window.get("end", math.nan), case["change_time"]),
+            "crb": _window_bound(sim, noise, start, record.time, truth_after if regime == "after" else sim.truth)
+            if regime != "across" else None})
+    return {"seed": seed, "vessel": vessel.name, "description": vessel.description,
+            "maneuver": case["maneuver"], "noise": case["noise"], "step": case["step"],
+            "change_time": case["change_time"], "duration": case["duration"],
+            "window_s": config.window_length, "refit_period_s": config.refit_period,
+            "sample_time_s": config.sample_time, "truth": sim.truth, "truth_after": truth_after,
+            "refits": refits}
+
+
+def _regime(start: float, end: float, change_time: float | None) -> str:
+    """Which truth a window of data [start, end] (s) belongs to: before or after the change, or across it."""
+    if change_time is None or end <= change_time:
+        return "before"
+    return "after" if start >= change_time else "across"
+
+
+def _window_bound(sim, noise: Noise, start: float, end: float, truth: dict) -> dict:
+    """Cramer-Rao bound (relative std) of K and T1 on the noise-free record within [start, end] s."""
+    time = sim.dataset.time
+    a, b = int(np.searchsorted(time, start)), int(np.searchsorted(time, end))
+    if b - a < 20:
+        return {"K": math.inf, "T1": math.inf}
+    exact = Dataset(time=time[a:b], rudder=sim.true_rudder[a:b], heading=sim.true_heading[a:b],
+                    yaw_rate=sim.true_yaw_rate[a:b], meta=sim.dataset.meta)
+    h = sim.dataset.sample_time
+    r = sim.true_yaw_rate
+    initial = [(sim.true_heading[a], r[a], (r[min(a + 1, len(r) - 1)] - r[max(a - 1, 0)]) / (2 * h))]
+    try:
+        bound = cramer_rao_bound(sim.structure, truth, exact, initial, noise.heading, noise.yaw_rate,
+                                 noise.rudder)
+    except np.linalg.LinAlgError:
+        return {"K": math.inf, "T1": math.inf}
+    return {q: float(bound[q] / truth[q]) if np.isfinite(bound[q]) else math.inf for q in ("K", "T1")}
+
+
+def well_excited(refit: dict) -> bool:
+    crb = refit["crb"]
+    return crb is not None and all(crb[q] <= WELL_EXCITED[q] for q in WELL_EXCITED)
+
+
+def summarise(cases: list[dict]) -> dict:
+    """The suite's figures over all cases (see the module docstring)."""
+    covered = {p: [] for p in PARAMETERS}
+    off = {"K": [], "T1": []}
+    worst = {"K": (0.0, None), "T1": (0.0, None)}
+    excited = rejected = 0
+    reasons: dict[str, int] = {}
+    recoveries, errors_before, beyond = [], [], []
+    changed, steady_hours = 0, 0.0
+    for case in cases:
+        for refit in case["refits"]:
+            published = refit["new"] and refit["status"] == "OK"
+            if published and refit["estimate_regime"] != "across":
+                truth = case["truth_after"] if refit["estimate_regime"] == "after" else case["truth"]
+                for p in PARAMETERS:
+                    error = abs(refit["parameters"][p] - truth[p])
+                    covered[p].append(error <= 1.96 * refit["std_errors"].get(p, math.nan))
+                if not case["step"]:
+                    for q in off:
+                        error = abs(refit["parameters"][q] / truth[q] - 1.0)
+                        off[q].append(error > OFF_TOLERANCE)
+                        if error > worst[q][0]:
+                            worst[q] = (error, case["seed"])
+            if not case["step"] and well_excited(refit):
+                excited += 1
+                if not published:
+                    rejected += 1
+                    for c in refit["conditions"] or ["new estimate not OK"]:
+                        reasons[c] = reasons.get(c, 0) + 1
+        if case["step"]:
+            recovery, error_before = _recovery(case)
+            recoveries.append(recovery)
+            errors_before.append(error_before)
+            beyond.append(recovery > case["window_s"] + case["refit_period_s"])
+        elif case["refits"]:
+            steady_hours += (case["refits"][-1]["time"] - case["refits"][0]["time"]) / 3600.0
+            changed += sum("vessel_changed" in r["conditions"] for r in case["refits"])
+    recoveries = np.array(recoveries, dtype=float)
+    return {
+        "cases": len(cases), "steady_cases": sum(not c["step"] for c in cases),
+        "step_cases": sum(c["step"] for c in cases),
+        "coverage": {p: _share(v) for p, v in covered.items()},
+        "published_ok": len(covered["K"]),
+        "steady": {"published_ok": len(off["K"]),
+                   **{q: {"worst_percent": 100 * worst[q][0], "worst_seed": worst[q][1],
+                          "share_off": _share(off[q])} for q in off}},
+        "well_excited": {"refits": excited, "rejected": rejected,
+                         "share_rejected": rejected / excited if excited else math.nan,
+                         "reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1]))},
+        "recovery": {"median_s": float(np.median(recoveries)) if len(recoveries) else math.nan,
+                     "worst_s": float(np.max(recoveries)) if len(recoveries) else math.nan,
+                     "share_beyond_window": _share(beyond),
+                     "error_before_percent_median": float(np.nanmedian(errors_before))
+                     if errors_before else math.nan,
+                     "error_before_percent_worst": float(np.nanmax(errors_before))
+                     if errors_before else math.nan},
+        "false_changes_per_hour": changed / steady_hours if steady_hours else math.nan,
+        "steady_hours": steady_hours,
+    }
+
+
+def _share(flags: list) -> float:
+    return float(np.mean(flags)) if len(flags) else math.nan
+
+
+def _k_trace(case: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Times (s) of the refits and the K (1/s) in force after each."""
+    kept = [(r["time"], r["parameters"]["K"]) for r in case["refits"] if "K" in r["parameters"]]
+    return np.array([t for t, _ in kept]), np.array([k for _, k in kept])
+
+
+def _recovery(case: dict) -> tuple[float, float]:
+    """Seconds until K stays within 5 % of the new truth, and the K error (RMS %) before the change."""
+    times, ks = _k_trace(case)
+    change, k0 = case["change_time"], case["truth"]["K"]
+    before = (times > change - 2 * case["window_s"] / 3) & (times <= change)
+    error = float(100 * np.sqrt(np.mean((ks[before] / k0 - 1) ** 2))) if before.any() else math.nan
+    return recovery_time(times, ks, change, case["truth_after"]["K"]), error
+
+
+def case_line(case: dict) -> str:
+    """One line per case: seed, vessel, manoeuvre, noise and its figures (for replay by seed)."""
+    refits = case["refits"]
+    ok = sum(r["new"] and r["status"] == "OK" for r in refits)
+    excited = [r for r in refits if well_excited(r)]
+    rejected = sum(not (r["new"] and r["status"] == "OK") for r in excited)
+    text = (f"seed {case['seed']} {case['vessel']} {case['maneuver']} noise {case['noise']:.2f}x "
+            f"window {case['window_s']:.0f} s: {ok}/{len(refits)} refits OK, rejected {rejected}/"
+            f"{len(excited)} well-excited")
+    if case["step"]:
+        recovery, error = _recovery(case)
+        text += f"; step at {case['change_time']:.0f} s: K back within 5 % after {recovery:.0f} s"
+        text += f" (error before {error:.2f} %)"
+    return text
+
+
+def run(quick: bool = False, seed: int = 0, count: int | None = None, plot_dir: str | None = None,
+        workers: int = WORKERS) -> dict:
+    count = count or (QUICK_COUNT if quick else DEFAULT_COUNT)
+    seeds = [seed + i for i in range(count)]
+    cases = []
+    if workers > 1 and count > 1:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            for i, case in enumerate(pool.map(run_case, seeds, [quick] * count)):
+                progress(f"vessels {i + 1}/{count}: {case_line(case)}")
+                cases.append(case)
+    else:
+        for i, s in enumerate(seeds):
+            cases.append(run_case(s, quick))
+            progress(f"vessels {i + 1}/{count}: {case_line(cases[-1])}")
+    result = {"summary": summarise(cases), "cases": [_brief(c) for c in cases],
+              "well_excited_crb": WELL_EXCITED}
+    if plot_dir:
+        result["plots"] = plot(cases, plot_dir)
+    return result
+
+
+def _brief(case: dict) -> dict:
+    """The case without its per-refit records (the JSON stays small), with its line of figures."""
+    out = {k: v for k, v in case.items() if k != "refits"}
+    out["line"] = case_line(case)
+    return out
+
+
+def plot(cases: list[dict], plot_dir: str) -> list[str]:
+    """vessels_recovery.png: the K error (%) in force against the time since the step, per step case."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    Path(plot_dir).mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for case in (c for c in cases if c["step"]):
+        times, ks = _k_trace(case)
+        truth = np.where(times > case["change_time"], case["truth_after"]["K"], case["truth"]["K"])
+        ax.plot((times - case["change_time"]) / case["window_s"], 100 * np.abs(ks / truth - 1), lw=0.8,
+                label=f"seed {case['seed']}")
+    ax.axhline(100 * RECOVERY_TOLERANCE, color="k", ls="--", lw=1)
+    ax.axvline(0, color="k", lw=1)
+    ax.set_yscale("log")
+    ax.set_xlabel("time since the step (windows)")
+    ax.set_ylabel("|K error| in force (%)")
+    ax.set_title("K -30 %, T1 +30 % mid-run: the published K against the truth (dashed: 5 %)", fontsize=9)
+    if sum(c["step"] for c in cases) <= 12:
+        ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = str(Path(plot_dir) / "vessels_recovery.png")
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return [path]
+
+
+def render(result: dict) -> str:
+    s = result["summary"]
+    lines = [f"vessels: {s['cases']} cases ({s['steady_cases']} steady, {s['step_cases']} with K -30 %, "
+             f"T1 +30 % mid-run), seed {result.get('seed')}; case i replays with --seed (seed + i) --count 1"]
+    lines += [c["line"] for c in result["cases"]]
+    lines.append(table(["parameter", "95 % coverage"], [[p, v] for p, v in s["coverage"].items()],
+                       f"coverage of the truth by the 95 % interval, over {s['published_ok']} published OK "
+                       "estimates (target about 0.95)"))
+    st = s["steady"]
+    lines.append(table(["parameter", "worst error %", "worst case seed", "share > 10 % off"],
+                       [[q, st[q]["worst_percent"], st[q]["worst_seed"], st[q]["share_off"]] for q in ("K", "T1")],
+                       f"steady vessels: {st['published_ok']} published OK estimates (target: none > 10 % off)"))
+    we = s["well_excited"]
+    crb = result["well_excited_crb"]
+    lines.append(f"well-excited windows (CRB relative std K <= {100 * crb['K']:.0f} %, T1 <= "
+                 f"{100 * crb['T1']:.0f} %) on steady vessels: {we['rejected']} of {we['refits']} refits "
+                 f"rejected ({100 * we['share_rejected']:.1f} %, target <= 5 %); conditions: "
+                 + (", ".join(f"{c} {n}" for c, n in we["reasons"].items()) or "-"))
+    rc = s["recovery"]
+    lines.append(f"step cases: K back within 5 % after {rc['median_s']:.0f} s median (target <= 60 s), "
+                 f"worst {rc['worst_s']:.0f} s; beyond one window + one refit period: "
+                 f"{100 * rc['share_beyond_window']:.0f} % (target 0); K error before the change "
+                 f"{rc['error_before_percent_median']:.2f} % median, {rc['error_before_percent_worst']:.2f} % worst")
+    lines.append(f"false vessel_changed: {s['false_changes_per_hour']:.2f} per hour over "
+                 f"{s['steady_hours']:.1f} h of steady data (target 0)")
+    return "\n\n".join(lines)
+
+
+register("vessels", "the online core on randomised vessels (USVs to ships, steady and stepped): coverage, "
+         "errors, rejected refits, recovery, false changes", run, render, plots=True, randomised=True)

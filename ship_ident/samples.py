@@ -1,0 +1,36 @@
+"""Measurements as the online core receives them: plain data, nothing of ROS or files.
+
+A ``Sample`` is one measured value of one role (``ROLES``: rudder angle in rad,
+heading in rad, yaw rate in rad/s, speed in m/s; NED, time in s). ``Topics``
+names where each role comes from: bag topics, or the user's CSV columns. The
+bag and CSV adapter (``io``) and the ROS node produce samples; the online
+identifier consumes them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+ROLES = ("rudder", "heading", "yaw_rate", "speed")
+
+
+@dataclass(frozen=True)
+class Topics:
+    """Input names: bag topics (when ``imu`` is set, heading and yaw rate come from that Imu topic)
+    and, for CSV files, the user's (role, column) pairs ``csv_columns`` (see ``io.parse_columns``)."""
+
+    rudder: str = "/usv/rudder"
+    heading: str = "/usv/heading"
+    yaw_rate: str = "/usv/yaw_rate"
+    speed: str = "/usv/speed"
+    imu: str = ""
+    velocity: str = ""  # Odometry or TwistStamped topic of the body-fixed velocity (3-DOF model)
+    csv_columns: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One measurement: time in s, role in ROLES, value in SI units (NED)."""
+
+    time: float
+    role: str
+    value: float

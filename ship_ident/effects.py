@@ -16,7 +16,8 @@ changes. Register it with ``register_effect`` (see README, "Adding an effect").
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
@@ -64,6 +65,17 @@ class Evidence:
     feature_label: str = ""
     feature_scale: float = 1.0
     residual: np.ndarray | None = None
+
+
+@dataclass
+class StartContext:
+    """What an effect's ``starts`` reads: the training data (a ``Dataset``), ``nested``, the fitted
+    parameters of the model without the effect, and ``refit(dataset)``, that model's cheap
+    regression fit (parameters) on other data, e.g. the training data seen through the effect."""
+
+    training: object
+    nested: dict
+    refit: Callable[[object], dict]
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
@@ -123,6 +135,12 @@ class Effect:
         """Values of the free parameters at which the effect does nothing: the model without it,
         where a fit with the effect can start (every effect here vanishes at zero)."""
         return {p.name: 0.0 for p in self.parameters if p.name not in getattr(self, "fixed", ())}
+
+    def starts(self, context: StartContext) -> list[dict]:
+        """Extra starting points (full parameter sets) for a fit with this effect, for parameters
+        that enter non-smoothly or have several minima: a local search from the model without
+        the effect would stay in the nearest minimum."""
+        return []
 
     # --- diagnosis --------------------------------------------------------
     def evidence(self, context) -> Evidence:
@@ -200,6 +218,19 @@ class RudderDelay(Effect):
 
     def effective_rudder(self, time, rudder, p):
         return np.interp(time - p["tau"], time, rudder)
+
+    def starts(self, context):
+        """Profile the dead time over a grid (0.25 s to the 5 s bound): at each delay the model
+        without it is refitted by regression on the delayed rudder. A delay of a few seconds
+        otherwise hides in T2 and T3 (a lag looks like a slow second pole), and the search from
+        tau = 0 stays there."""
+        data = context.training
+        grid = [tau for tau in (0.25, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0) if tau >= 2 * data.sample_time]
+        out = []
+        for tau in grid:
+            delayed = replace(data, rudder=self.effective_rudder(data.time, data.rudder, {"tau": tau}))
+            out.append(dict(context.refit(delayed), tau=tau))
+        return out
 
     def evidence(self, context):
         c = _partial_corr(context.equation_residual, -context.signals.delta_dot,
@@ -282,8 +313,9 @@ class SpeedDependence(Effect):
     parameters = (
         Parameter("U_ref", "m/s", "reference speed at which K and T hold (fixed: median speed)",
                   1.0, 0.0, np.inf),
-        Parameter("n_K", "-", "exponent of K in U/U_ref (1: K ~ U)", 1.0, -3.0, 4.0),
-        Parameter("n_T", "-", "exponent of the time constants in U_ref/U (1: T ~ 1/U)", 1.0, -3.0, 4.0),
+        Parameter("n_K", "-", "exponent of K in U/U_ref (1: K ~ U, the non-dimensional Nomoto form)",
+                  1.0, 0.0, 2.0),
+        Parameter("n_T", "-", "exponent of the time constants in U_ref/U (1: T ~ 1/U)", 1.0, 0.0, 2.0),
     )
     fixed = ("U_ref",)
 
@@ -302,6 +334,10 @@ class SpeedDependence(Effect):
     def from_coefficients(self, coefficients, base):
         return {"n_K": 1.0, "n_T": 1.0}
 
+    def starts(self, context):
+        """The non-dimensional Nomoto form, K ~ U and T ~ 1/U, from the model without the effect."""
+        return [dict(context.nested, n_K=1.0, n_T=1.0)]
+
     def evidence(self, context):
         if context.signals.speed is None or np.std(context.signals.speed) < 1e-6:
             return Evidence(0.0, "no speed variation in the data: speed dependence cannot be seen")
@@ -312,6 +348,100 @@ class SpeedDependence(Effect):
                         f"the error follows rudder times speed change (correlation {c:+.2f}): "
                         "the rudder's effect changes with speed",
                         feature, "rudder x speed change (deg m/s)", np.degrees(1.0))
+
+
+T_UPPER_BOUND = 1e3   # s, the base models' upper bound on T and T1 (structure.BASE_MODELS)
+
+
+class CourseInstability(Effect):
+    name = "course_instability"
+    explanation = ("the ship does not hold a straight course by itself: left alone it turns one way "
+                   "or the other (negative linear yaw damping), and only the growing damping of a "
+                   "faster turn keeps the turn bounded")
+    parameters = (
+        Parameter("n1", "-", "linear yaw damping relative to the Nomoto model's (1: as the model; "
+                  "below 0: course-unstable)", 1.0, -3.0, 3.0),
+        Parameter("n3", "s^2/rad^2", "cubic yaw damping that bounds the unstable turn", 0.0, 0.0, 1e7),
+    )
+
+    def forcing_terms(self, p):
+        """T r' + n1 r + n3 r^3 = K delta: the base model's r moved by (1 - n1) r - n3 r^3."""
+        return [ForcingTerm(1.0 - p["n1"], r_power=1), ForcingTerm(-p["n3"], r_power=3)]
+
+    def neutral(self):
+        return {"n1": 1.0, "n3": 0.0}
+
+    def from_coefficients(self, coefficients, base):
+        return self.neutral()
+
+    def starts(self, context):
+        """The sign of the linear damping: a search from n1 = 1 never crosses the unstable region
+        where the simulation diverges, so it also starts from n1 = 0.5, 0, -0.25 and -0.5 with
+        the cubic damping that holds the unstable turn at about half the largest measured rate."""
+        r_max = float(np.max(np.abs(context.training.yaw_rate))) or 1e-3
+        return [dict(context.nested, n1=n1, n3=max(-n1, 0.05) / (0.5 * r_max) ** 2)
+                for n1 in (0.5, 0.0, -0.25, -0.5)]
+
+    def evidence(self, context):
+        s = context.signals
+        c = _partial_corr(context.equation_residual, s.r, [s.delta])
+        pinned = max(context.parameters.get("T", 0.0), context.parameters.get("T1", 0.0)) >= 0.999 * T_UPPER_BOUND
+        note = "; the time constant sits on its upper bound, which is what course instability looks like" \
+            if pinned else ""
+        return Evidence((abs(c) + (1.0 if pinned else 0.0)) * np.sqrt(context.effective_samples),
+                        f"the error follows the turn rate itself (correlation {c:+.2f}){note}: "
+                        "the linear yaw damping is not what the model assumes",
+                        s.r, "yaw rate (deg/s)", np.degrees(1.0))
+
+
+class QuadraticYaw(Effect):
+    name = "quadratic_yaw"
+    explanation = ("the hull's resistance to turning grows with the square of the turn rate "
+                   "(cross-flow drag, as on small fast boats)")
+    parameters = (Parameter("d_q", "s/rad", "quadratic yaw damping: forcing -d_q r|r|", 0.0, -1e4, 1e4),)
+
+    def forcing_terms(self, p):
+        return [ForcingTerm(-p["d_q"], r_power=1, abs_power=1)]
+
+    def regressors(self, signals):
+        return {"r|r|": signals.r * np.abs(signals.r)}
+
+    def from_coefficients(self, coefficients, base):
+        return {"d_q": -coefficients["r|r|"]}
+
+    def evidence(self, context):
+        s = context.signals
+        c = _partial_corr(context.equation_residual, s.r * np.abs(s.r), [s.r])
+        return Evidence(abs(c) * np.sqrt(context.effective_samples),
+                        f"the error grows with the turn rate squared, with its sign (correlation {c:+.2f}): "
+                        "the hull's turning resistance is quadratic",
+                        s.r, "yaw rate (deg/s)", np.degrees(1.0))
+
+
+class RudderStall(Effect):
+    name = "rudder_stall"
+    explanation = ("the rudder turns the boat less than proportionally at large angles: the flow "
+                   "over it separates (stall) or its lift saturates")
+    parameters = (Parameter("c_stall", "1/rad^2", "rudder moment loss: acting rudder d (1 - c_stall d^2)",
+                            0.0, -1.0, 0.9),)
+
+    def effective_rudder(self, time, rudder, p):
+        """Lift that grows less than linearly; c_stall < 0.9 keeps it increasing up to 35 deg."""
+        return rudder * (1.0 - p["c_stall"] * rudder ** 2)
+
+    def regressors(self, signals):
+        return {"delta^3": signals.delta ** 3}
+
+    def from_coefficients(self, coefficients, base):
+        return {"c_stall": -coefficients["delta^3"] / base["K"] if base["K"] else 0.0}
+
+    def evidence(self, context):
+        s = context.signals
+        c = _partial_corr(context.equation_residual, s.delta ** 3, [s.delta])
+        return Evidence(abs(c) * np.sqrt(context.effective_samples),
+                        f"the error follows the rudder angle cubed (correlation {c:+.2f}): the rudder's "
+                        "moment does not grow in proportion at large angles",
+                        s.delta, "rudder (deg)", np.degrees(1.0))
 
 
 EFFECTS: dict[str, Effect] = {}
@@ -325,5 +455,6 @@ def register_effect(effect: Effect) -> Effect:
     return effect
 
 
-for _effect in (RudderOffset(), CubicYaw(), RudderDelay(), WindYaw(), GyroBias(), SpeedDependence()):
+for _effect in (RudderOffset(), CubicYaw(), RudderDelay(), WindYaw(), GyroBias(), SpeedDependence(),
+                CourseInstability(), QuadraticYaw(), RudderStall()):
     register_effect(_effect)

@@ -44,7 +44,9 @@ def plot_measured_vs_model(d: Diagnosis, directory: Path) -> str:
             ax.axvspan(held_out.time[a], held_out.time[b - 1], color="tab:blue", alpha=0.08, lw=0,
                        label="held-out window" if k == 0 else None)
         for k, seg in enumerate(d.worst_segments):
-            ax.axvspan(seg["start"], seg["end"], ymin=0.0, ymax=0.04, color="tab:orange", alpha=0.9, lw=0,
+            moved = shift if seg.get("held_out") else 0.0
+            ax.axvspan(seg["start"] + moved, seg["end"] + moved, ymin=0.0, ymax=0.04, color="tab:orange",
+                       alpha=0.9, lw=0,
                        label=f"worst {len(d.worst_segments)} segments" if k == 0 else None)
         ax.plot(d.dataset.time, getattr(d.dataset, measured) * scale, color="black", lw=0.8, label="measured")
         if d.cross_manoeuvre:
@@ -213,10 +215,13 @@ def write_report(d: Diagnosis, directory, source: str = "") -> Path:
     candidates = _table(["effect", "improvement", "heading", "yaw rate", "t", "significant", "evidence"], [
         [c.effect, f"{100 * c.improvement:.1f} %", f"{c.rmse_heading_after * DEG:.3g} deg",
          f"{c.rmse_yaw_rate_after * DEG:.3g} deg/s", f"{c.t_statistic:.1f}", "yes" if c.significant else "no",
-         c.evidence.sentence + (f" ({c.note})" if c.note else "")] for c in d.candidates])
-    worst = _table(["time (s)", "heading RMSE (deg)", "yaw-rate RMSE (deg/s)", "turning", "|r| (deg/s)",
+         c.evidence.sentence + (f" ({c.note})" if c.note else "")
+         + (f"; much worse held out: {c.extrapolation}" if c.extrapolation else "")] for c in d.candidates])
+    worst = _table(["recording", "time (s)", "heading RMSE (deg)", "yaw-rate RMSE (deg/s)", "turning", "|r| (deg/s)",
                     "heading", "rudder std (deg)", "speed (m/s)"], [
-        [f"{s['start']:.0f}-{s['end']:.0f}",
+        [s.get("recording", "") + (" (held out)" if s.get("held_out") and "held out" not in
+                                   s.get("recording", "") else ""),
+         f"{s['start']:.0f}-{s['end']:.0f}",
          f"{s['rmse_heading'] * DEG:.3g}" + (f" (was {s['rmse_heading_before'] * DEG:.3g})"
                                              if "rmse_heading_before" in s else ""),
          f"{s['rmse_yaw_rate'] * DEG:.3g}" + (f" (was {s['rmse_yaw_rate_before'] * DEG:.3g})"
@@ -236,7 +241,7 @@ td,th{{border:1px solid #ccc;padding:2px 6px}} img{{max-width:100%}}</style></he
 <p>Data: {html.escape(source)}. Fitted on {covered(d.training):.0f} s, run free on {covered(d.held_out):.0f} s
 held out ({len(d.held_out.segments)} free runs, each from the measured heading and yaw rate).
 All figures are free-run figures. Yaw-rate noise floor {d.noise['yaw_rate'] * DEG:.3g} deg/s.</p>
-<p><b>Verdict: {d.verdict}</b></p>
+<p><b>Verdict: {d.verdict}</b>: {html.escape(d.verdict_sentence)}</p>
 <h2>Held-out free-run measures</h2>{measures}
 <h2>Candidate effects (best first)</h2>{candidates}
 <h2>Worst segments</h2>{worst}

@@ -170,11 +170,12 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, clean_files, ship_ident_cl
 @pytest.fixture(scope="module")
 def short_runs(tmp_path_factory):
     """60-200 s manoeuvres of one plain nomoto2 vessel: a noisy zigzag (bag) and turning circle
-    (CSV at 0.2 s), and a noise-free random-rudder run (CSV) to judge on."""
+    (CSV at 0.2 s), and a random-rudder run with realistic noise (CSV) to judge on (judged on
+    noise-free data, the scatter of a 120 s fit at 3x noise is itself structure above the floor)."""
     folder = tmp_path_factory.mktemp("recordings")
     runs = {"zigzag": ("zigzag10", "60", "0.1", "3", folder / "zigzag.mcap"),
             "turning": ("turning", "60", "0.2", "3", folder / "turning.csv"),
-            "random": ("random", "200", "0.1", "0", folder / "random.csv")}
+            "random": ("random", "200", "0.1", "1", folder / "random.csv")}
     for seed, (maneuver, duration, step, noise, path) in enumerate(runs.values(), start=11):
         code, _ = run_main("simulate", "--maneuver", maneuver, "--effects", "", "--noise", noise,
                            "--duration", duration, "--sample-time", step, "--seed", seed, "--out", path)

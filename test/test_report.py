@@ -32,6 +32,9 @@ def test_report_writes_and_references_every_png(report):
         path = report.parent / name
         assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "Verdict" in html and "free run" in html
+    assert re.search(r"Verdict: (adequate|missing_effect|unexplained)</b>: \w", html)   # and its sentence
+    # the worst segments name their recording, held-out ones included
+    assert "simulate:random (training)" in html and "simulate:random (held out)" in html
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt-get install -y chromium)")

@@ -82,7 +82,8 @@ def format_diagnosis(result, source, options: str = "") -> str:
         c = seg["conditions"]
         was = (f" (before: {seg['rmse_heading_before'] * DEG:.3g} deg, "
                f"{seg['rmse_yaw_rate_before'] * DEG:.3g} deg/s)") if "rmse_heading_before" in seg else ""
-        lines.append(f"  {seg['start']:7.1f}-{seg['end']:7.1f} s: heading {seg['rmse_heading'] * DEG:.3g} deg, "
+        lines.append(f"  {seg['recording']}{' (held out)' if seg['held_out'] and 'held out' not in seg['recording'] else ''} "
+                     f"{seg['start']:7.1f}-{seg['end']:7.1f} s: heading {seg['rmse_heading'] * DEG:.3g} deg, "
                      f"yaw rate {seg['rmse_yaw_rate'] * DEG:.3g} deg/s{was}; turning {c['turning']}, "
                      f"|r| {c['mean_abs_yaw_rate_deg_s']:.2f} deg/s, heading {c['heading_sector']}, "
                      f"rudder std {c['rudder_std_deg']:.1f} deg"
@@ -90,17 +91,19 @@ def format_diagnosis(result, source, options: str = "") -> str:
     tests = result.residual_tests
     lines.append(f"residual: {100 * tests['autocorrelation_outside']:.0f} % of autocorrelation lags and "
                  f"{100 * tests['cross_correlation_outside']:.0f} % of rudder cross-correlation lags "
-                 f"outside +-{tests['bound']:.3f} (95 %)"
+                 f"outside +-{tests['bound']:.3f} (95 %), RMS {tests['noise_ratio']:.2f} times the noise floor"
                  + ("" if tests["white"] and tests["independent_of_rudder"] else
-                    ": the residual still carries structure the model lacks"))
+                    f": the residual still carries structure the model lacks; it follows {tests['follows']}"))
     lines += [f"  {w['message']}" for w in result.parameter_warnings]
-    lines.append(f"verdict: {result.verdict}")
+    lines.append(f"verdict: {result.verdict}: {result.verdict_sentence}")
     for c in result.candidates:
         lines.append(f"  {c.effect:<17} improvement {100 * c.improvement:5.1f} % "
                      f"(heading {100 * c.improvement_heading:.0f} %, yaw rate {100 * c.improvement_yaw_rate:.0f} %), "
                      f"{'significant' if c.significant else 'not significant'} (t {c.t_statistic:.1f})"
                      f"{'; ' + c.note if c.note else ''}")
         lines.append(f"      {c.evidence.sentence}")
+        if c.extrapolation:
+            lines.append(f"      much worse held out: {c.extrapolation}")
     if result.verdict == "missing_effect":
         top = result.candidates[0].effect
         effects = ",".join(result.structure.effect_names + (top,))

@@ -1,0 +1,142 @@
+"""``hidden-effects``: does ``diagnose`` name a hidden effect it was never tuned to? (randomised)
+
+Each case draws a vessel with ``simulator.random_vessel`` (quick USVs to slow ships), a
+manoeuvre, and hides one effect of the catalogue, none, or a pair, at a strength that matters
+(``strength``: e.g. a delay of 20-50 % of T1, a rudder moment 25-45 % short at 35 deg). A case
+is **fair** when an output-error fit of the true structure (started, as a candidate, from the
+diagnosed model with the effects neutral and from the effects' own starts) removes at least ``FAIR_SHARE`` of
+the held-out free-run error (the diagnosis's own windows): only fair cases are counted.
+A fair case is **named first** when the top candidate is the hidden effect (one of the pair)
+and **fixed** when that candidate removes at least half of the held-out error (the larger of
+heading and yaw rate, as ``improvement``); for a pair, at least half of what the true pair
+removes (the diagnosis adds one effect per round). On the none cases the share of ``missing_effect``
+verdicts is the false alarm rate. Seeds are drawn fresh each run and printed.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run
+from ..effects import EFFECTS
+from ..simulator import random_vessel, simulate
+from ..structure import Structure
+from . import progress, register
+from .common import table
+
+FAIR_SHARE = 0.5                # the true structure must remove this share of the held-out error
+FIXED_SHARE = 0.5               # the top candidate must remove this share to count as fixed
+MANOEUVRES = ("zigzag10", "zigzag20", "random", "mixed")
+DURATION_S = {"usv": 600.0, "ship": 2400.0}
+SAMPLE_TIME_S = {"usv": 0.1, "ship": 0.5}   # a slow ship's log needs no 10 Hz (KVLCC2 is fitted at 1 s)
+PAIR_SHARE = 0.15               # share of the cases that hide a pair
+
+
+def strength(effect: str, vessel, rng: np.random.Generator) -> dict:
+    """True parameters (SI) of ``effect`` at a strength that matters on ``vessel``: scaled by its
+    gain K, its time constant T1 and the turn rate r0 of 20 deg of rudder."""
+    p = vessel.parameters
+    r0 = p["K"] * np.radians(20.0)
+    sign = rng.choice((-1.0, 1.0))
+    if effect == "rudder_offset":
+        return {"delta_r": sign * np.radians(rng.uniform(1.5, 3.0))}
+    if effect == "cubic_yaw":
+        return {"alpha": rng.uniform(0.4, 0.8) / r0 ** 2}
+    if effect == "rudder_delay":
+        return {"tau": float(min(5.0, rng.uniform(0.2, 0.5) * p["T1"]))}
+    if effect == "wind_yaw":
+        amplitude, direction = p["K"] * np.radians(rng.uniform(2.0, 4.0)), rng.uniform(0, 2 * np.pi)
+        return {"wind_c1": amplitude * np.cos(direction), "wind_s1": amplitude * np.sin(direction),
+                "wind_c2": 0.3 * amplitude * np.sin(direction), "wind_s2": 0.0}
+    if effect == "gyro_bias":
+        return {"r_bias": sign * np.radians(rng.uniform(0.3, 0.6))}
+    if effect == "speed_dependence":
+        return {"n_K": 1.0, "n_T": 1.0}
+    if effect == "course_instability":
+        n1 = -rng.uniform(0.2, 0.5)
+        return {"n1": n1, "n3": -n1 / (rng.uniform(0.3, 0.5) * r0) ** 2}
+    if effect == "quadratic_yaw":
+        return {"d_q": rng.uniform(0.5, 1.0) / r0}
+    if effect == "rudder_stall":
+        return {"c_stall": rng.uniform(0.6, 0.85)}
+    raise ValueError(f"no strength for {effect!r}")
+
+
+def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
+    """One case: simulate ``hidden`` on a vessel drawn from ``seed``, diagnose, check fairness."""
+    rng = np.random.default_rng(seed)
+    vessel = random_vessel(rng)
+    kind = vessel.name.split("(")[0]
+    manoeuvre = str(rng.choice(MANOEUVRES))
+    truth = {}
+    for effect in hidden:
+        truth.update(strength(effect, vessel, rng))
+    sim = simulate(manoeuvre, vessel, effects=hidden, parameters=truth, duration=DURATION_S[kind],
+                   sample_time=SAMPLE_TIME_S[kind], seed=seed)
+    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
+    top = result.candidates[0]
+    row = {"seed": seed, "vessel": vessel.name, "manoeuvre": manoeuvre, "hidden": "+".join(hidden) or "none",
+           "verdict": result.verdict, "top": top.effect, "top_improvement": top.improvement}
+    if hidden:
+        true_fit = _fit(Structure("nomoto2", hidden), result.training, DEFAULT_METHOD, result.estimate.parameters)
+        true_run = free_run(true_fit.structure, true_fit.parameters, result.held_out)
+        row["true_improvement"] = max(
+            _improvement(result.run.fit["rmse_heading"], true_run.fit["rmse_heading"]),
+            _improvement(result.run.fit["rmse_yaw_rate"], true_run.fit["rmse_yaw_rate"]))
+        row["fair"] = bool(row["true_improvement"] >= FAIR_SHARE)
+        row["named_first"] = top.effect in hidden
+        needed = FIXED_SHARE * (row["true_improvement"] if len(hidden) > 1 else 1.0)
+        row["fixed"] = bool(row["named_first"] and top.improvement >= needed)
+    return row
+
+
+def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
+    rng = np.random.default_rng(seed)
+    names = list(EFFECTS)
+    count = count or (len(names) + 2 if quick else 120)
+    rows = []
+    for k in range(count):
+        if k % (len(names) + 1) == len(names):
+            hidden = ()
+        elif rng.uniform() < PAIR_SHARE:
+            pair = rng.choice(len(names), 2, replace=False)
+            hidden = tuple(sorted((names[pair[0]], names[pair[1]])))
+        else:
+            hidden = (names[k % (len(names) + 1)],)
+        case_seed = int(rng.integers(2 ** 31))
+        row = run_case(case_seed, hidden)
+        progress(f"hidden-effects {k + 1}/{count}: {row['hidden']} on {row['vessel']} ({row['manoeuvre']}, "
+                 f"seed {case_seed}): top {row['top']} {100 * row['top_improvement']:.0f} %, {row['verdict']}"
+                 + (f", true fit {100 * row['true_improvement']:.0f} %" if "true_improvement" in row else ""))
+        rows.append(row)
+    fair = [r for r in rows if r.get("fair")]
+    none = [r for r in rows if r["hidden"] == "none"]
+    per_effect = {}
+    for r in fair:
+        entry = per_effect.setdefault(r["hidden"], {"fair": 0, "named_first": 0, "fixed": 0})
+        entry["fair"] += 1
+        entry["named_first"] += r["named_first"]
+        entry["fixed"] += r["fixed"]
+    return {"seed": seed, "cases": len(rows), "fair": len(fair),
+            "named_first_and_fixed": float(np.mean([r["fixed"] for r in fair])) if fair else float("nan"),
+            "named_first": float(np.mean([r["named_first"] for r in fair])) if fair else float("nan"),
+            "none_cases": len(none),
+            "false_missing_effect": float(np.mean([r["verdict"] == "missing_effect" for r in none]))
+            if none else float("nan"),
+            "none_verdicts": {v: sum(r["verdict"] == v for r in none) for v in ("adequate", "missing_effect",
+                                                                              "unexplained")},
+            "per_effect": per_effect, "rows": rows}
+
+
+def render(result: dict) -> str:
+    rows = [[name, e["fair"], f"{100 * e['named_first'] / e['fair']:.0f} %", f"{100 * e['fixed'] / e['fair']:.0f} %"]
+            for name, e in sorted(result["per_effect"].items())]
+    text = table(["hidden", "fair cases", "named first", "named first and fixed"], rows,
+                 f"hidden-effects, seed {result['seed']}: {result['cases']} cases, {result['fair']} fair")
+    return (text + f"\n\nnamed first and fixed: {100 * result['named_first_and_fixed']:.0f} % of "
+            f"{result['fair']} fair cases (named first: {100 * result['named_first']:.0f} %)\n"
+            f"none cases: {result['none_cases']}, missing_effect in "
+            f"{100 * result['false_missing_effect']:.0f} % (verdicts {result['none_verdicts']})")
+
+
+register("hidden-effects", "does diagnose name and fix a hidden effect on random vessels? (randomised)",
+         run, render, randomised=True)

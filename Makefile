@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test test-fast demo bench clean
+.PHONY: setup lint test test-fast demo bench clean
 
 setup: $(STAMP)
 
@@ -17,10 +17,14 @@ $(STAMP): setup.py package.xml
 	  || echo "note: chromium not installed; the report rendering test will skip"
 	touch $(STAMP)
 
-test: $(STAMP)
+lint: $(STAMP)
+	$(PY) -m ruff check ship_ident test
+	$(PY) -m ruff format --check ship_ident test
+
+test: lint
 	$(PY) -m pytest -n 2 -q -rs test
 
-test-fast: $(STAMP)
+test-fast: lint
 	$(PY) -m pytest -n 2 -q -rs -m "not slow" test
 
 demo: $(STAMP)

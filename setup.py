@@ -38,7 +38,7 @@ setup(
     ],
     extras_require={
         "ros": ROS_WHEELS,
-        "test": ["pytest>=7.4,<10", "pytest-xdist>=3.3,<4", "hypothesis>=6.80,<7",
+        "test": ["pytest>=7.4,<10", "pytest-xdist>=3.3,<4", "hypothesis>=6.80,<7", "ruff>=0.5,<1",
                  "colcon-common-extensions>=0.3,<1"],
         "bench": ["sysidentpy>=0.4,<1", "dask[distributed]>=2023.1"],
         "fleet": ["dask[distributed]>=2023.1"],

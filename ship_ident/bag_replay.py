@@ -9,6 +9,7 @@ when a ``stop`` event ends the replay early. One bag per call, so many-bag
 replay (``fleet``) runs it per task. Bad input raises ``DataError`` or
 ``ConfigError`` (one line).
 """
+
 from __future__ import annotations
 
 import sys
@@ -42,8 +43,7 @@ class Progress:
         done = min(max((bag_time - self.start) / self.span, 0.0), 1.0)
         bar = "#" * int(30 * done)
         speed = (bag_time - self.start) / max(now - self.wall0, 1e-9)
-        print(f"\rreplay [{bar:<30}] {100 * done:5.1f} %  {speed:6.0f}x real time", end="",
-              file=sys.stderr, flush=True)
+        print(f"\rreplay [{bar:<30}] {100 * done:5.1f} %  {speed:6.0f}x real time", end="", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.enabled:
@@ -56,13 +56,20 @@ class ReplayResult:
 
     bag: str
     records: list[RefitRecord]
-    duration: float        # s of bag time replayed
-    wall_seconds: float    # s of wall time of the identification loop
-    interrupted: bool      # stopped early by ``stop``
+    duration: float  # s of bag time replayed
+    wall_seconds: float  # s of wall time of the identification loop
+    interrupted: bool  # stopped early by ``stop``
 
 
-def replay_bag(bag, topics: Topics, config: OnlineConfig, out=None, on_record=None,
-               stop: threading.Event | None = None, progress: bool = False) -> ReplayResult:
+def replay_bag(
+    bag,
+    topics: Topics,
+    config: OnlineConfig,
+    out=None,
+    on_record=None,
+    stop: threading.Event | None = None,
+    progress: bool = False,
+) -> ReplayResult:
     """Run one bag (or CSV) through the online identifier with the bag's time as the clock.
 
     ``config``: the online configuration (its speed topic is dropped when the
@@ -80,7 +87,7 @@ def replay_bag(bag, topics: Topics, config: OnlineConfig, out=None, on_record=No
     bar = Progress(samples[0].time, samples[-1].time, progress)
     records, fed = [], []
     wall0 = time.perf_counter()
-    with (ReplayWriter(out, topics) if out else _NoWriter()) as writer:
+    with ReplayWriter(out, topics) if out else _NoWriter() as writer:
         for record in run_schedule(identifier, _feed(samples, writer, stop, fed)):
             writer.write_record(record)
             records.append(record)
@@ -113,27 +120,34 @@ class ReplayWriter:
         self._MultiArray = types["std_msgs/msg/Float64MultiArray"]
         self._Layout = types["std_msgs/msg/MultiArrayLayout"]
         self._Dimension = types["std_msgs/msg/MultiArrayDimension"]
-        self._topic_of = {"rudder": topics.rudder, "heading": topics.heading,
-                          "yaw_rate": topics.yaw_rate, "speed": topics.speed}
+        self._topic_of = {
+            "rudder": topics.rudder,
+            "heading": topics.heading,
+            "yaw_rate": topics.yaw_rate,
+            "speed": topics.speed,
+        }
         if topics.imu:  # the Imu was read as heading and yaw rate: write those as Float64
             self._topic_of.update(heading=Topics().heading, yaw_rate=Topics().yaw_rate)
         self._writer = BagWriter(path, "mcap")
 
     def write_sample(self, sample: Sample) -> None:
-        self._writer.write(self._topic_of[sample.role], FLOAT64,
-                           self._Float64(data=float(sample.value)), sample.time)
+        self._writer.write(self._topic_of[sample.role], FLOAT64, self._Float64(data=float(sample.value)), sample.time)
 
     def write_record(self, record: RefitRecord) -> None:
         data = record.to_json()
-        self._writer.write(ESTIMATE_TOPIC, "std_msgs/msg/String", self._String(data=dumps_json(data)),
-                           record.time)
+        self._writer.write(ESTIMATE_TOPIC, "std_msgs/msg/String", self._String(data=dumps_json(data)), record.time)
         if data["parameters"]:
             names = list(data["parameters"])
-            layout = self._Layout(dim=[self._Dimension(label=",".join(names), size=len(names),
-                                                       stride=len(names))], data_offset=0)
+            layout = self._Layout(
+                dim=[self._Dimension(label=",".join(names), size=len(names), stride=len(names))], data_offset=0
+            )
             values = np.array([data["parameters"][n] for n in names], dtype=np.float64)
-            self._writer.write(PARAMETERS_TOPIC, "std_msgs/msg/Float64MultiArray",
-                               self._MultiArray(layout=layout, data=values), record.time)
+            self._writer.write(
+                PARAMETERS_TOPIC,
+                "std_msgs/msg/Float64MultiArray",
+                self._MultiArray(layout=layout, data=values),
+                record.time,
+            )
 
     def __enter__(self) -> ReplayWriter:
         return self

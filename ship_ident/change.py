@@ -27,6 +27,7 @@ K (and the main time constant when they determine it) on them with
 everything else held from the last good model (a steady turn with the
 rudder held gives K = r / delta alone).
 """
+
 from __future__ import annotations
 
 import math
@@ -40,12 +41,12 @@ from .metrics import effective_sample_fraction
 from .signals import noise_level
 from .structure import Structure
 
-CONFIRMATIONS = 2                 # refits in a row above the ratio before a change is declared
-SHORT_RATIO_FACTOR = 4.0          # the newest refit period's error must exceed this many times the ratio
-MIN_SHORT_SAMPLES = 20            # the short test needs at least this many samples
-MEDIAN_OF_CHI2_1 = 0.4549         # median of e^2 / sigma^2 for Gaussian e
+CONFIRMATIONS = 2  # refits in a row above the ratio before a change is declared
+SHORT_RATIO_FACTOR = 4.0  # the newest refit period's error must exceed this many times the ratio
+MIN_SHORT_SAMPLES = 20  # the short test needs at least this many samples
+MEDIAN_OF_CHI2_1 = 0.4549  # median of e^2 / sigma^2 for Gaussian e
 UPPER_QUARTILE_OF_CHI2_1 = 1.3233  # its 75th percentile (a change in the last half of the short
-                                   # test's samples shows there, spikes in a quarter do not)
+# test's samples shows there, spikes in a quarter do not)
 MIN_LEVEL = math.radians(0.01) ** 2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
 # A reference model must be well determined: relative standard errors at most these (a window of
 # steady turning gives a K to 10-25 % and T1 to 60-400 %, and any new rudder motion surprises it).
@@ -54,15 +55,18 @@ REFERENCE_RELATIVE_ERRORS = {"K": 0.05, "T": 0.2, "T1": 0.2}
 
 def whole_blocks(dataset: Dataset, n: int, offset: int = 0) -> tuple:
     """Half-open index ranges of whole blocks of n samples inside the dataset's segments."""
-    return tuple((a, a + n) for start, stop in dataset.segments
-                 for a in range(start + offset, stop - n + 1, n))
+    return tuple((a, a + n) for start, stop in dataset.segments for a in range(start + offset, stop - n + 1, n))
 
 
 def covering_blocks(dataset: Dataset, n: int) -> tuple:
     """Half-open index ranges of blocks of n samples covering the dataset's segments (each
     segment's last block may be shorter; blocks of one sample are left out)."""
-    return tuple((a, min(a + n, stop)) for start, stop in dataset.segments
-                 for a in range(start, stop, n) if min(a + n, stop) - a >= 2)
+    return tuple(
+        (a, min(a + n, stop))
+        for start, stop in dataset.segments
+        for a in range(start, stop, n)
+        if min(a + n, stop) - a >= 2
+    )
 
 
 def block_errors(structure: Structure, params: dict, dataset: Dataset, blocks: tuple) -> np.ndarray:
@@ -81,9 +85,9 @@ class ChangeDetector:
     refits in a row (see the module docstring)."""
 
     def __init__(self, ratio: float, length: float, short: float):
-        self.ratio = ratio      # mean-square ratio (dimensionless); 0: never
-        self.length = length    # s
-        self.short = short      # s, the newest data of the quick test (one refit period)
+        self.ratio = ratio  # mean-square ratio (dimensionless); 0: never
+        self.length = length  # s
+        self.short = short  # s, the newest data of the quick test (one refit period)
         self.references = deque()  # (window end s, parameters, usual level (rad/s)^2), oldest first
         self.votes = 0
         self.short_votes = 0
@@ -92,8 +96,11 @@ class ChangeDetector:
         """Learn the usual error level of a just-accepted estimate on its own (full) window; an
         estimate less well determined than REFERENCE_RELATIVE_ERRORS is not a reference."""
         params, errors = estimate.parameters, estimate.std_errors
-        if not all(errors.get(name, math.inf) <= limit * abs(params[name])
-                   for name, limit in REFERENCE_RELATIVE_ERRORS.items() if name in params):
+        if not all(
+            errors.get(name, math.inf) <= limit * abs(params[name])
+            for name, limit in REFERENCE_RELATIVE_ERRORS.items()
+            if name in params
+        ):
             return
         n = int(round(self.length / dataset.sample_time))
         blocks = whole_blocks(dataset, n) + whole_blocks(dataset, n, n // 2)
@@ -116,9 +123,9 @@ class ChangeDetector:
 
     def _short_ratio(self, structure: Structure, dataset: Dataset) -> float:
         """Error of the newest ``short`` s (robust mean square from the median or, when larger, the
-        upper quartile of e^2, as for Gaussian errors), run
-        with the newest reference fitted before them, over that reference's usual level (NaN without one). The run starts ``length``
-        s back, so that its unknown initial yaw acceleration has died out by then."""
+        upper quartile of e^2, as for Gaussian errors), run with the newest reference fitted
+        before them, over that reference's usual level (NaN without one). The run starts
+        ``length`` s back, so that its unknown initial yaw acceleration has died out by then."""
         m = max(int(round(self.short / dataset.sample_time)), MIN_SHORT_SAMPLES)
         start, stop = dataset.segments[-1]
         reference = self._reference(float(dataset.time[stop - m]), drop=False) if stop - start >= m else None
@@ -126,7 +133,7 @@ class ChangeDetector:
             return math.nan
         a = max(start, stop - max(int(round(self.length / dataset.sample_time)), m))
         _, r = structure.simulate(reference[1], dataset.slice(a, stop))
-        squared = (r[-m:] - dataset.yaw_rate[stop - m:stop]) ** 2
+        squared = (r[-m:] - dataset.yaw_rate[stop - m : stop]) ** 2
         robust = max(np.median(squared) / MEDIAN_OF_CHI2_1, np.percentile(squared, 75) / UPPER_QUARTILE_OF_CHI2_1)
         return float(robust) / reference[2]
 
@@ -160,9 +167,11 @@ class ChangeDetector:
         return ratio, float(dataset.time[a + variance_change_point(squared)])
 
 
-def fit_gain(structure: Structure, params: dict, dataset: Dataset, blocks: tuple, names=("K",),
-             iterations: int = 8) -> tuple[dict, dict]:
-    """The parameters ``names`` (those the structure has; by default the gain K, 1/s) fitted by Gauss-Newton to the yaw rate of ``dataset``, run free from the measured state
+def fit_gain(
+    structure: Structure, params: dict, dataset: Dataset, blocks: tuple, names=("K",), iterations: int = 8
+) -> tuple[dict, dict]:
+    """The parameters ``names`` (those the structure has; by default the gain K, 1/s) fitted by
+    Gauss-Newton to the yaw rate of ``dataset``, run free from the measured state
     at the start of each of ``blocks``, with every other parameter held at ``params``; returns the
     parameters and the standard errors of the fitted ones (residual variance, autocorrelation
     allowed for)."""

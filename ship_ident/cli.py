@@ -4,6 +4,7 @@ Each subcommand lives in ``ship_ident/commands/<name>.py`` and provides
 ``add_parser(subparsers)`` (which sets ``func``) and its run function. Every
 error a user can cause ends in one line on stderr and exit code 2.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,7 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog="ship-ident",
         description="Identify USV steering models (Nomoto) from bags and CSV files, replay bags, "
-                    "diagnose missing physics.")
+        "diagnose missing physics.",
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         try:
@@ -55,8 +57,16 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (CommandError, DataError, StructureError, MethodError, FileNotFoundError,
-            PermissionError, IsADirectoryError, ValueError) as exc:
+    except (
+        CommandError,
+        DataError,
+        StructureError,
+        MethodError,
+        FileNotFoundError,
+        PermissionError,
+        IsADirectoryError,
+        ValueError,
+    ) as exc:
         print(f"ship-ident {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except BrokenPipeError:

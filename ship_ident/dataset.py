@@ -4,6 +4,7 @@ Units are SI throughout: time in s, rudder angle in rad, heading in rad
 (unwrapped, NED: positive clockwise seen from above), yaw rate in rad/s,
 forward speed in m/s. A positive rudder angle gives a positive yaw rate.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -25,10 +26,10 @@ class Dataset:
     record, and nothing is integrated or differentiated across a gap.
     """
 
-    time: np.ndarray          # s, uniform step sample_time within each segment
-    rudder: np.ndarray        # rad
-    heading: np.ndarray       # rad, unwrapped
-    yaw_rate: np.ndarray      # rad/s
+    time: np.ndarray  # s, uniform step sample_time within each segment
+    rudder: np.ndarray  # rad
+    heading: np.ndarray  # rad, unwrapped
+    yaw_rate: np.ndarray  # rad/s
     speed: np.ndarray | None = None  # m/s
     segments: tuple[tuple[int, int], ...] = ()
     gaps: tuple[tuple[float, float], ...] = ()  # (start s, end s) of gaps in the source
@@ -54,34 +55,45 @@ class Dataset:
         if self.n_samples < 2:
             return float(self.meta.get("sample_time", 0.1))
         start, stop = max(self.segments, key=lambda s: s[1] - s[0])
-        return float(np.median(np.diff(self.time[start:stop]))) if stop - start > 1 else float(
-            np.median(np.diff(self.time)))
+        return (
+            float(np.median(np.diff(self.time[start:stop])))
+            if stop - start > 1
+            else float(np.median(np.diff(self.time)))
+        )
 
     @property
     def duration(self) -> float:
         return float(self.time[-1] - self.time[0]) if self.n_samples else 0.0
 
-    def slice(self, start: int, stop: int) -> "Dataset":
+    def slice(self, start: int, stop: int) -> Dataset:
         """The samples ``[start, stop)`` as a new Dataset, segments and the recordings' sample
         ranges (``meta["recordings"]``) clipped."""
-        segs = tuple((max(a, start) - start, min(b, stop) - start)
-                     for a, b in self.segments if min(b, stop) > max(a, start))
+        segs = tuple(
+            (max(a, start) - start, min(b, stop) - start) for a, b in self.segments if min(b, stop) > max(a, start)
+        )
         meta = self.meta
         if "recordings" in meta:
-            meta = dict(meta, recordings=[
-                dict(r, start=max(r["start"], start) - start, stop=min(r["stop"], stop) - start)
-                for r in meta["recordings"] if min(r["stop"], stop) > max(r["start"], start)])
+            meta = dict(
+                meta,
+                recordings=[
+                    dict(r, start=max(r["start"], start) - start, stop=min(r["stop"], stop) - start)
+                    for r in meta["recordings"]
+                    if min(r["stop"], stop) > max(r["start"], start)
+                ],
+            )
         return replace(
-            self, meta=meta,
-            time=self.time[start:stop], rudder=self.rudder[start:stop],
-            heading=self.heading[start:stop], yaw_rate=self.yaw_rate[start:stop],
+            self,
+            meta=meta,
+            time=self.time[start:stop],
+            rudder=self.rudder[start:stop],
+            heading=self.heading[start:stop],
+            yaw_rate=self.yaw_rate[start:stop],
             speed=None if self.speed is None else self.speed[start:stop],
             segments=segs,
-            gaps=tuple(g for g in self.gaps
-                       if stop > start and self.time[start] <= g[0] <= self.time[stop - 1]),
+            gaps=tuple(g for g in self.gaps if stop > start and self.time[start] <= g[0] <= self.time[stop - 1]),
         )
 
-    def segment_datasets(self, min_samples: int = 2) -> list["Dataset"]:
+    def segment_datasets(self, min_samples: int = 2) -> list[Dataset]:
         """Each contiguous segment as its own Dataset."""
         return [self.slice(a, b) for a, b in self.segments if b - a >= min_samples]
 
@@ -91,23 +103,37 @@ class Dataset:
             values = getattr(self, name)
             if values is not None and not np.all(np.isfinite(values)):
                 bad = int(np.count_nonzero(~np.isfinite(values)))
-                raise DataError(f"{name} holds {bad} NaN/Inf samples; clean the data or let "
-                                "the reader drop them")
+                raise DataError(f"{name} holds {bad} NaN/Inf samples; clean the data or let the reader drop them")
 
 
-def resample_series(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_time: float,
-                    gap_threshold: float | None = None, unwrap_heading: bool = True,
-                    meta: dict | None = None) -> Dataset:
+def resample_series(
+    series: dict[str, tuple[np.ndarray, np.ndarray]],
+    sample_time: float,
+    gap_threshold: float | None = None,
+    unwrap_heading: bool = True,
+    meta: dict | None = None,
+) -> Dataset:
     """Turn asynchronous time series into one uniformly sampled Dataset (see ``resample_signals``)."""
     time, values, segments, gaps = resample_signals(series, sample_time, gap_threshold, unwrap_heading)
-    return Dataset(time=time, rudder=values["rudder"], heading=values["heading"], yaw_rate=values["yaw_rate"],
-                   speed=values.get("speed"), segments=segments, gaps=gaps,
-                   meta=dict(meta or {}, sample_time=sample_time))
+    return Dataset(
+        time=time,
+        rudder=values["rudder"],
+        heading=values["heading"],
+        yaw_rate=values["yaw_rate"],
+        speed=values.get("speed"),
+        segments=segments,
+        gaps=gaps,
+        meta=dict(meta or {}, sample_time=sample_time),
+    )
 
 
-def resample_signals(series: dict[str, tuple[np.ndarray, np.ndarray]], sample_time: float,
-                     gap_threshold: float | None = None, unwrap_heading: bool = True,
-                     required=("rudder", "heading", "yaw_rate")):
+def resample_signals(
+    series: dict[str, tuple[np.ndarray, np.ndarray]],
+    sample_time: float,
+    gap_threshold: float | None = None,
+    unwrap_heading: bool = True,
+    required=("rudder", "heading", "yaw_rate"),
+):
     """Asynchronous time series on one uniform grid: ``(time, {name: values}, segments, gaps)``.
 
     ``series`` maps ``rudder``, ``heading``, ``yaw_rate`` (and optionally
@@ -177,19 +203,24 @@ def resampled(dataset: Dataset, sample_time: float) -> Dataset:
         return dataset
     parts = []
     for part in dataset.segment_datasets():
-        signals = {name: (part.time, getattr(part, name)) for name in ("rudder", "heading", "yaw_rate", "speed")
-                   if getattr(part, name) is not None}
+        signals = {
+            name: (part.time, getattr(part, name))
+            for name in ("rudder", "heading", "yaw_rate", "speed")
+            if getattr(part, name) is not None
+        }
         if part.duration >= 2 * sample_time:
             parts.append(resample_series(signals, sample_time, unwrap_heading=False))
     if not parts:
-        raise DataError(f"{dataset.meta.get('source', 'a recording')} has no stretch of "
-                        f"{2 * sample_time:g} s to resample onto a {sample_time:g} s step")
-    return _concatenate(parts, [p.time for p in parts], dataset.gaps,
-                        dict(dataset.meta, sample_time=sample_time))
+        raise DataError(
+            f"{dataset.meta.get('source', 'a recording')} has no stretch of "
+            f"{2 * sample_time:g} s to resample onto a {sample_time:g} s step"
+        )
+    return _concatenate(parts, [p.time for p in parts], dataset.gaps, dict(dataset.meta, sample_time=sample_time))
 
 
-def join_recordings(recordings: list[Dataset], names: list[str] | None = None,
-                    sample_time: float | None = None) -> Dataset:
+def join_recordings(
+    recordings: list[Dataset], names: list[str] | None = None, sample_time: float | None = None
+) -> Dataset:
     """Several recordings as one Dataset, each its own segment(s), never bridged.
 
     All are brought onto one grid step ``sample_time`` (s; default the first recording's) and laid
@@ -199,8 +230,11 @@ def join_recordings(recordings: list[Dataset], names: list[str] | None = None,
     """
     if not recordings:
         raise DataError("no recordings given; name at least one bag or CSV file")
-    names = list(names) if names is not None else [
-        str(r.meta.get("source", f"recording {i + 1}")) for i, r in enumerate(recordings)]
+    names = (
+        list(names)
+        if names is not None
+        else [str(r.meta.get("source", f"recording {i + 1}")) for i, r in enumerate(recordings)]
+    )
     if len(names) != len(recordings):
         raise ValueError(f"{len(names)} names for {len(recordings)} recordings")
     h = recordings[0].sample_time if sample_time is None else float(sample_time)
@@ -215,8 +249,7 @@ def join_recordings(recordings: list[Dataset], names: list[str] | None = None,
         entries.append({"name": name, "start": start, "stop": start + r.n_samples})
         start += r.n_samples
         t0 = float(r.time[-1] + shift + 2 * h)
-    return _concatenate(recordings, times, gaps,
-                        dict(recordings[0].meta, sample_time=h, recordings=entries))
+    return _concatenate(recordings, times, gaps, dict(recordings[0].meta, sample_time=h, recordings=entries))
 
 
 def _concatenate(parts: list[Dataset], times: list[np.ndarray], gaps, meta: dict) -> Dataset:
@@ -231,5 +264,13 @@ def _concatenate(parts: list[Dataset], times: list[np.ndarray], gaps, meta: dict
         return np.concatenate([getattr(p, name) for p in parts])
 
     speed = None if any(p.speed is None for p in parts) else join("speed")
-    return Dataset(np.concatenate(times), join("rudder"), join("heading"), join("yaw_rate"), speed,
-                   tuple(segments), tuple(sorted(gaps)), meta)
+    return Dataset(
+        np.concatenate(times),
+        join("rudder"),
+        join("heading"),
+        join("yaw_rate"),
+        speed,
+        tuple(segments),
+        tuple(sorted(gaps)),
+        meta,
+    )

@@ -9,6 +9,7 @@ with. About a minute; Ctrl-C stops everything.
 The helpers here (``ros_environment``, ``start_node``, ``start_play``,
 ``stop``, ``Listener``) are also what the node tests use.
 """
+
 from __future__ import annotations
 
 import json
@@ -24,15 +25,19 @@ ROOT = Path(__file__).resolve().parent.parent
 BAG = ROOT / "bags" / "demo_seed001.mcap"
 TRUTH = ROOT / "bags" / "demo_seed001.truth.json"
 CONFIG = ROOT / "config" / "ship_ident.yaml"
-RATE = 15.0            # x real time
-PRINT_EVERY = 30.0     # s of bag time between printed estimates
+RATE = 15.0  # x real time
+PRINT_EVERY = 30.0  # s of bag time between printed estimates
 
 
 def ros_environment(domain_id: int, log_dir) -> dict:
     """A copy of os.environ for a child on its own ROS domain, discovery limited to this host."""
     env = dict(os.environ)
-    env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_LOG_DIR=str(log_dir), PYTHONUNBUFFERED="1")
+    env.update(
+        ROS_DOMAIN_ID=str(domain_id),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        ROS_LOG_DIR=str(log_dir),
+        PYTHONUNBUFFERED="1",
+    )
     return env
 
 
@@ -48,8 +53,18 @@ def start_node(env: dict, *parameters: str, params_file=CONFIG, **popen) -> subp
 
 def start_play(env: dict, bag, rate: float, *options: str, **popen) -> subprocess.Popen:
     """``ship-ident play`` as a child process, waiting up to 20 s for the node to subscribe."""
-    command = [sys.executable, "-m", "ship_ident.cli", "play", str(bag), "--rate", str(rate),
-               "--wait-for-subscribers", "20", *options]
+    command = [
+        sys.executable,
+        "-m",
+        "ship_ident.cli",
+        "play",
+        str(bag),
+        "--rate",
+        str(rate),
+        "--wait-for-subscribers",
+        "20",
+        *options,
+    ]
     return subprocess.Popen(command, env=env, **popen)
 
 
@@ -88,20 +103,18 @@ class Listener:
 
         os.environ.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id,
-                   signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("ship_ident_listener", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.estimates: list[dict] = []
         self.parameters: list = []
         self.diagnostics: list = []
-        self.node.create_subscription(String, f"/{node_name}/estimate",
-                                      lambda m: self.estimates.append(json.loads(m.data)), 100)
-        self.node.create_subscription(Float64MultiArray, f"/{node_name}/parameters",
-                                      self.parameters.append, 100)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics",
-                                      lambda m: self.diagnostics.extend(m.status), 100)
+        self.node.create_subscription(
+            String, f"/{node_name}/estimate", lambda m: self.estimates.append(json.loads(m.data)), 100
+        )
+        self.node.create_subscription(Float64MultiArray, f"/{node_name}/parameters", self.parameters.append, 100)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.diagnostics.extend(m.status), 100)
 
     def spin(self, seconds: float, until=None) -> bool:
         """Process messages for up to ``seconds``; stop early once ``until()`` is true."""
@@ -135,8 +148,7 @@ def main() -> int:
     truth = json.loads(TRUTH.read_text())["parameters"]
     names = list(truth)
     domain_id = 20 + os.getpid() % 80
-    header = f"{'bag time':>10} " + " ".join(
-        f"{n:>9}       " if n in ("K", "T1") else f"{n:>9}" for n in names)
+    header = f"{'bag time':>10} " + " ".join(f"{n:>9}       " if n in ("K", "T1") else f"{n:>9}" for n in names)
     print(f"ship_ident demo: node + bag {BAG.name} at {RATE:g}x over DDS (domain {domain_id})")
     with tempfile.TemporaryDirectory(prefix="ship_ident_demo_") as log_dir:
         env = ros_environment(domain_id, log_dir)
@@ -185,13 +197,19 @@ def _summary(listener: Listener, truth: dict, names: list, wall: float) -> int:
     print(_row("final", final["parameters"], names, truth))
     errors = {n: 100 * (final["parameters"][n] / truth[n] - 1) for n in ("K", "T1") if truth.get(n)}
     refit = [e["compute_seconds"] for e in listener.estimates if e.get("new_estimate")]
-    print(f"\n{len(listener.estimates)} refits in {wall:.0f} s; last status {final['status']}"
-          + (f" ({', '.join(final['conditions'])})" if final["conditions"] else ""))
-    print("errors against truth: " + ", ".join(f"{n} {e:+.1f} %" for n, e in errors.items())
-          + f"; free-run yaw-rate rmse {math.degrees(final['fit']['rmse_yaw_rate']):.3f} deg/s")
+    print(
+        f"\n{len(listener.estimates)} refits in {wall:.0f} s; last status {final['status']}"
+        + (f" ({', '.join(final['conditions'])})" if final["conditions"] else "")
+    )
+    print(
+        "errors against truth: "
+        + ", ".join(f"{n} {e:+.1f} %" for n, e in errors.items())
+        + f"; free-run yaw-rate rmse {math.degrees(final['fit']['rmse_yaw_rate']):.3f} deg/s"
+    )
     if refit:
-        print(f"refit compute time: median {1000 * sorted(refit)[len(refit) // 2]:.0f} ms, "
-              f"max {1000 * max(refit):.0f} ms")
+        print(
+            f"refit compute time: median {1000 * sorted(refit)[len(refit) // 2]:.0f} ms, max {1000 * max(refit):.0f} ms"
+        )
     return 0
 
 

@@ -33,11 +33,12 @@ without it) and run free on the same held-out windows.
   ``NOISE_MARGIN`` of the yaw-rate noise floor passes: that is parameter
   scatter in a free run, not structure.
 """
+
 from __future__ import annotations
 
 import os
-from copy import copy
 from concurrent.futures import ProcessPoolExecutor
+from copy import copy
 from dataclasses import dataclass, field, replace
 from multiprocessing import get_context
 
@@ -50,35 +51,41 @@ from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
 from .signals import Signals, compute_signals, noise_level
 from .structure import Structure
 
-DEFAULT_METHOD = "rlssvm+oe"   # cheap start + output-error refinement: the fits dominate the run time
-TRAINING_FRACTION = 0.65       # first part of the record for fitting, the rest is held out
-MIN_IMPROVEMENT = 0.15         # a candidate must remove at least this share of the held-out error
-SIGNIFICANCE_T = 3.0           # Diebold-Mariano t threshold (one-sided, ~6 candidates compared)
-MIN_HELD_OUT_S = 30.0          # s
+DEFAULT_METHOD = "rlssvm+oe"  # cheap start + output-error refinement: the fits dominate the run time
+TRAINING_FRACTION = 0.65  # first part of the record for fitting, the rest is held out
+MIN_IMPROVEMENT = 0.15  # a candidate must remove at least this share of the held-out error
+SIGNIFICANCE_T = 3.0  # Diebold-Mariano t threshold (one-sided, ~6 candidates compared)
+MIN_HELD_OUT_S = 30.0  # s
 HELD_OUT_WINDOW_TIME_CONSTANTS = 40.0  # held-out free-run windows last this many yaw time constants ...
-HELD_OUT_WINDOW_MIN_S = 60.0           # ... but at least this long (s)
-HELD_OUT_MIN_WINDOWS = 3               # ... and short enough for this many independent free runs
-WORST_WINDOW_TIME_CONSTANTS = 20.0     # worst-segment windows: this many time constants, 30-60 s
+HELD_OUT_WINDOW_MIN_S = 60.0  # ... but at least this long (s)
+HELD_OUT_MIN_WINDOWS = 3  # ... and short enough for this many independent free runs
+WORST_WINDOW_TIME_CONSTANTS = 20.0  # worst-segment windows: this many time constants, 30-60 s
 WORST_WINDOW_LIMITS_S = (30.0, 60.0)
 WORST_SEGMENTS = 5
-MIN_SPEED_VARIATION = 0.02     # speed std / mean below which speed dependence is not tried
-CORRELATION_LAG_S = 10.0       # s, largest lag of the residual correlation tests
-NOISE_MARGIN = 1.25            # held-out yaw-rate RMSE within this factor of the noise floor: no structure
-MIN_TRAINING_GAIN = 0.02       # a significant candidate also removes this share of the yaw-rate error of free
-                               # runs on the training data: a poorly excited slow ship's model scatters
-                               # on held-out data, and a candidate that only moves along it is no effect
-MUCH_WORSE = 0.25              # a candidate this much worse (heading or yaw rate) says why: extrapolation
-EXTRAPOLATION_MARGIN = 0.1     # held-out beyond the training's 1-99 % range by this share of it
-SPEED_SPAN = 1.25              # speed exponents are fitted only when the training's 95th/5th speed
-                               # percentiles differ by this factor; else K ~ U, T ~ 1/U (n_K = n_T = 1)
-PARSIMONY = 0.005              # ranking: each parameter of a candidate costs this share of improvement
-                               # (course_instability holds cubic_yaw: at equal gain the simpler ranks first)
+MIN_SPEED_VARIATION = 0.02  # speed std / mean below which speed dependence is not tried
+CORRELATION_LAG_S = 10.0  # s, largest lag of the residual correlation tests
+NOISE_MARGIN = 1.25  # held-out yaw-rate RMSE within this factor of the noise floor: no structure
+MIN_TRAINING_GAIN = 0.02  # a significant candidate also removes this share of the yaw-rate error of free
+# runs on the training data: a poorly excited slow ship's model scatters
+# on held-out data, and a candidate that only moves along it is no effect
+MUCH_WORSE = 0.25  # a candidate this much worse (heading or yaw rate) says why: extrapolation
+EXTRAPOLATION_MARGIN = 0.1  # held-out beyond the training's 1-99 % range by this share of it
+SPEED_SPAN = 1.25  # speed exponents are fitted only when the training's 95th/5th speed
+# percentiles differ by this factor; else K ~ U, T ~ 1/U (n_K = n_T = 1)
+PARSIMONY = 0.005  # ranking: each parameter of a candidate costs this share of improvement
+# (course_instability holds cubic_yaw: at equal gain the simpler ranks first)
 # the effect that frees a parameter pinned at a physical bound
-FREED_BY = {("T", "upper"): "course_instability", ("T1", "upper"): "course_instability",
-            ("T3", "lower"): "rudder_delay", ("T2", "lower"): "quadratic_yaw or rudder_stall",
-            ("T", "lower"): "quadratic_yaw or rudder_stall"}
-COURSE_UNSTABLE = ("; the linear yaw damping 1/T wants to be zero or negative: the ship is close to "
-                   "course-unstable, which the physical bound T > 0 cannot express")
+FREED_BY = {
+    ("T", "upper"): "course_instability",
+    ("T1", "upper"): "course_instability",
+    ("T3", "lower"): "rudder_delay",
+    ("T2", "lower"): "quadratic_yaw or rudder_stall",
+    ("T", "lower"): "quadratic_yaw or rudder_stall",
+}
+COURSE_UNSTABLE = (
+    "; the linear yaw damping 1/T wants to be zero or negative: the ship is close to "
+    "course-unstable, which the physical bound T > 0 cannot express"
+)
 
 
 @dataclass
@@ -109,23 +116,31 @@ class Candidate:
     improvement_heading: float = 0.0
     improvement_yaw_rate: float = 0.0
     t_statistic: float = 0.0
-    signal: str = "heading"            # the signal that improves most
+    signal: str = "heading"  # the signal that improves most
     estimate: Estimate | None = None
     fit: dict | None = None
     note: str = ""
-    extrapolation: str | None = None   # why a much worse candidate fails on the held-out data
-    training_gain: float = 0.0         # share of the training free-run yaw-rate error it removes
+    extrapolation: str | None = None  # why a much worse candidate fails on the held-out data
+    training_gain: float = 0.0  # share of the training free-run yaw-rate error it removes
 
     def to_json(self) -> dict:
-        return {"effect": self.effect, "improvement": self.improvement, "significant": self.significant,
-                "rmse_heading_after": self.rmse_heading_after,
-                "rmse_yaw_rate_after": self.rmse_yaw_rate_after, "evidence": self.evidence.sentence,
-                "improvement_heading": self.improvement_heading,
-                "improvement_yaw_rate": self.improvement_yaw_rate, "t_statistic": self.t_statistic,
-                "improves_most": self.signal, "evidence_score": self.evidence.score,
-                "parameters": None if self.estimate is None else
-                {k: float(v) for k, v in self.estimate.parameters.items()}, "note": self.note,
-                "extrapolation": self.extrapolation, "training_gain": self.training_gain}
+        return {
+            "effect": self.effect,
+            "improvement": self.improvement,
+            "significant": self.significant,
+            "rmse_heading_after": self.rmse_heading_after,
+            "rmse_yaw_rate_after": self.rmse_yaw_rate_after,
+            "evidence": self.evidence.sentence,
+            "improvement_heading": self.improvement_heading,
+            "improvement_yaw_rate": self.improvement_yaw_rate,
+            "t_statistic": self.t_statistic,
+            "improves_most": self.signal,
+            "evidence_score": self.evidence.score,
+            "parameters": None if self.estimate is None else {k: float(v) for k, v in self.estimate.parameters.items()},
+            "note": self.note,
+            "extrapolation": self.extrapolation,
+            "training_gain": self.training_gain,
+        }
 
 
 @dataclass
@@ -143,17 +158,17 @@ class Diagnosis:
 
     dataset: Dataset
     training: Dataset
-    held_out: Dataset                  # held-out samples, segments = free-run windows
-    estimate: Estimate                 # current model fitted on the training part
-    run: FreeRun                       # its held-out free runs
+    held_out: Dataset  # held-out samples, segments = free-run windows
+    estimate: Estimate  # current model fitted on the training part
+    run: FreeRun  # its held-out free runs
     context: ResidualContext
     candidates: list[Candidate]
     worst_segments: list[dict]
     residual_tests: dict
     parameter_warnings: list[dict]
     noise: dict
-    cross_manoeuvre: bool = False      # held out: other recordings, not the tail of ``dataset``
-    before: Estimate | None = None     # the model without the last listed effect (--effects)
+    cross_manoeuvre: bool = False  # held out: other recordings, not the tail of ``dataset``
+    before: Estimate | None = None  # the model without the last listed effect (--effects)
     before_run: FreeRun | None = None
     evidences: dict = field(default_factory=dict)
 
@@ -181,24 +196,31 @@ class Diagnosis:
         verdict = self.verdict
         if verdict == "missing_effect":
             best = next(c for c in self.candidates if c.significant)
-            return (f"{best.effect} is missing: adding it removes {100 * best.improvement_yaw_rate:.0f} % "
-                    "of the held-out yaw-rate error")
+            return (
+                f"{best.effect} is missing: adding it removes {100 * best.improvement_yaw_rate:.0f} % "
+                "of the held-out yaw-rate error"
+            )
         if verdict == "adequate":
             return "the held-out error is the sensors' noise: nothing the catalogue knows is missing"
         parts = []
         tests = self.residual_tests
         if not (tests["white"] and tests["independent_of_rudder"]):
-            parts.append(f"the held-out yaw-rate error keeps structure ({100 * tests['autocorrelation_outside']:.0f} % "
-                         f"of its autocorrelation lags outside the bounds, RMS {tests['noise_ratio']:.1f} times "
-                         f"the noise floor) and follows {tests['follows']}")
+            parts.append(
+                f"the held-out yaw-rate error keeps structure ({100 * tests['autocorrelation_outside']:.0f} % "
+                f"of its autocorrelation lags outside the bounds, RMS {tests['noise_ratio']:.1f} times "
+                f"the noise floor) and follows {tests['follows']}"
+            )
         for w in self.pinned:
             parts.append(w["message"])
         if "low_excitation" in self.estimate.flags:
             parts.append("the training data excite the yaw too little (low_excitation) to credit any effect")
         best = self.candidates[0] if self.candidates else None
-        tail = (f"; no catalogued effect removes it (best: {best.effect}, "
-                f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant)"
-                if best else "; no catalogued effect is left to try")
+        tail = (
+            f"; no catalogued effect removes it (best: {best.effect}, "
+            f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant)"
+            if best
+            else "; no catalogued effect is left to try"
+        )
         return "; ".join(parts) + tail
 
     def to_json(self) -> dict:
@@ -208,19 +230,28 @@ class Diagnosis:
         record["verdict_sentence"] = self.verdict_sentence
         record["candidates"] = [c.to_json() for c in self.candidates]
         record["diagnosis"] = {
-            "training": {"start": float(self.training.time[0]), "end": float(self.training.time[-1]),
-                         "fit": self.estimate.fit},
-            "held_out": {"start": float(self.held_out.time[0]), "end": float(self.held_out.time[-1]),
-                         "windows": len(self.held_out.segments),
-                         "data": "other recordings" if self.cross_manoeuvre else "tail of the record"},
+            "training": {
+                "start": float(self.training.time[0]),
+                "end": float(self.training.time[-1]),
+                "fit": self.estimate.fit,
+            },
+            "held_out": {
+                "start": float(self.held_out.time[0]),
+                "end": float(self.held_out.time[-1]),
+                "windows": len(self.held_out.segments),
+                "data": "other recordings" if self.cross_manoeuvre else "tail of the record",
+            },
             "noise": self.noise,
             "worst_segments": self.worst_segments,
             "residual_tests": self.residual_tests,
             "parameter_warnings": self.parameter_warnings,
-            "before": None if self.before is None else {
+            "before": None
+            if self.before is None
+            else {
                 "structure": self.before.structure.to_json(),
                 "parameters": {k: float(v) for k, v in self.before.parameters.items()},
-                "fit": dict(self.before_run.fit, data="held-out")},
+                "fit": dict(self.before_run.fit, data="held-out"),
+            },
         }
         return record
 
@@ -230,8 +261,10 @@ def split(dataset: Dataset, training_fraction: float = TRAINING_FRACTION) -> tup
     """First ``training_fraction`` of the samples for fitting, the rest held out."""
     cut = int(round(training_fraction * dataset.n_samples))
     if (dataset.n_samples - cut) * dataset.sample_time < MIN_HELD_OUT_S:
-        raise DataError(f"{dataset.duration:.0f} s of data leave less than {MIN_HELD_OUT_S:.0f} s to "
-                        "hold out for validation; record a longer run")
+        raise DataError(
+            f"{dataset.duration:.0f} s of data leave less than {MIN_HELD_OUT_S:.0f} s to "
+            "hold out for validation; record a longer run"
+        )
     return dataset.slice(0, cut), dataset.slice(cut, dataset.n_samples)
 
 
@@ -290,12 +323,25 @@ def loss_t_statistic(error_before: np.ndarray, error_after: np.ndarray) -> float
 # --- the equation residual and the evidence ----------------------------------
 def _rows(signals: Signals) -> Signals:
     rows = signals.rows
-    pick = (lambda v: None if v is None else v[rows])
-    return replace(signals, time=signals.time[rows], psi=signals.psi[rows], r=signals.r[rows],
-                   r_dot=signals.r_dot[rows], r_ddot=signals.r_ddot[rows], delta=signals.delta[rows],
-                   delta_dot=signals.delta_dot[rows], r_measured=signals.r_measured[rows],
-                   heading_rate=signals.heading_rate[rows], speed=pick(signals.speed),
-                   mask=np.ones(len(rows), bool), base_column_scales={})
+
+    def pick(values):
+        return None if values is None else values[rows]
+
+    return replace(
+        signals,
+        time=signals.time[rows],
+        psi=signals.psi[rows],
+        r=signals.r[rows],
+        r_dot=signals.r_dot[rows],
+        r_ddot=signals.r_ddot[rows],
+        delta=signals.delta[rows],
+        delta_dot=signals.delta_dot[rows],
+        r_measured=signals.r_measured[rows],
+        heading_rate=signals.heading_rate[rows],
+        speed=pick(signals.speed),
+        mask=np.ones(len(rows), bool),
+        base_column_scales={},
+    )
 
 
 def equation_residual(structure: Structure, parameters: dict, signals: Signals) -> np.ndarray:
@@ -308,15 +354,14 @@ def equation_residual(structure: Structure, parameters: dict, signals: Signals) 
     forcing = np.zeros_like(r)
     for effect in structure.effects:
         for term in effect.forcing_terms(p):
-            value = term.coefficient * r ** term.r_power * np.abs(r) ** term.abs_power
+            value = term.coefficient * r**term.r_power * np.abs(r) ** term.abs_power
             trig = {1: np.cos, 2: np.sin}.get(term.trig)
             forcing += value * (trig(term.harmonic * signals.psi) if trig else 1.0)
     if structure.order == 1:
         left = p["T"] * tscale * signals.r_dot + r
         right = p["K"] * gain * rudder
     else:
-        left = (p["T1"] * p["T2"] * tscale ** 2 * signals.r_ddot
-                + (p["T1"] + p["T2"]) * tscale * signals.r_dot + r)
+        left = p["T1"] * p["T2"] * tscale**2 * signals.r_ddot + (p["T1"] + p["T2"]) * tscale * signals.r_dot + r
         right = p["K"] * gain * (rudder + p["T3"] * tscale * rudder_rate)
     return left - right - forcing
 
@@ -341,11 +386,16 @@ def conditions(dataset: Dataset, a: int, b: int) -> dict:
     turning = "straight" if abs(mean_r) < np.radians(0.5) else ("starboard" if mean_r > 0 else "port")
     heading = float(np.degrees(np.mod(np.mean(dataset.heading[a:b]), 2 * np.pi)))
     rudder = dataset.rudder[a:b]
-    out = {"turning": turning, "mean_abs_yaw_rate_deg_s": float(np.degrees(np.mean(np.abs(r)))),
-           "heading_deg": heading, "heading_sector": SECTORS[int(((heading + 22.5) % 360) // 45)],
-           "rudder_std_deg": float(np.degrees(np.std(rudder))),
-           "rudder_rate_deg_s": float(np.degrees(np.mean(np.abs(np.diff(rudder))) / dataset.sample_time))
-           if b - a > 1 else 0.0}
+    out = {
+        "turning": turning,
+        "mean_abs_yaw_rate_deg_s": float(np.degrees(np.mean(np.abs(r)))),
+        "heading_deg": heading,
+        "heading_sector": SECTORS[int(((heading + 22.5) % 360) // 45)],
+        "rudder_std_deg": float(np.degrees(np.std(rudder))),
+        "rudder_rate_deg_s": float(np.degrees(np.mean(np.abs(np.diff(rudder))) / dataset.sample_time))
+        if b - a > 1
+        else 0.0,
+    }
     if dataset.speed is not None:
         out["speed"] = float(np.mean(dataset.speed[a:b]))
     return out
@@ -360,8 +410,14 @@ def recordings(data: Dataset, default: str) -> list[tuple[str, int, int]]:
     return [(str(data.meta.get("source") or default), 0, data.n_samples)]
 
 
-def worst_segments(parts: list[tuple[Dataset, list, bool]], structure: Structure, parameters: dict,
-                   length_s: float, count: int = WORST_SEGMENTS, before: Estimate | None = None) -> list[dict]:
+def worst_segments(
+    parts: list[tuple[Dataset, list, bool]],
+    structure: Structure,
+    parameters: dict,
+    length_s: float,
+    count: int = WORST_SEGMENTS,
+    before: Estimate | None = None,
+) -> list[dict]:
     """Windows of every recording, training and held-out (``parts``: data, its recordings as
     ``recordings`` gives them, held out or not), ranked by the error of short free runs started
     in each: the ``count`` worst overall and the worst of every recording not among them, so each
@@ -381,10 +437,15 @@ def worst_segments(parts: list[tuple[Dataset, list, bool]], structure: Structure
             heading_b, yaw_rate_b = before.structure.simulate(before.parameters, cut)
         for a, b in cut.segments:
             name = next((n for n, lo, hi in names if lo <= a < hi), names[0][0])
-            row = {"recording": name, "held_out": held_out, "start": float(cut.time[a]),
-                   "end": float(cut.time[b - 1]),
-                   "rmse_heading": float(np.sqrt(np.mean(eh[a:b] ** 2))),
-                   "rmse_yaw_rate": float(np.sqrt(np.mean(er[a:b] ** 2))), "conditions": conditions(cut, a, b)}
+            row = {
+                "recording": name,
+                "held_out": held_out,
+                "start": float(cut.time[a]),
+                "end": float(cut.time[b - 1]),
+                "rmse_heading": float(np.sqrt(np.mean(eh[a:b] ** 2))),
+                "rmse_yaw_rate": float(np.sqrt(np.mean(er[a:b] ** 2))),
+                "conditions": conditions(cut, a, b),
+            }
             if before is not None:
                 row["rmse_heading_before"] = float(np.sqrt(np.mean((heading_b[a:b] - cut.heading[a:b]) ** 2)))
                 row["rmse_yaw_rate_before"] = float(np.sqrt(np.mean((yaw_rate_b[a:b] - cut.yaw_rate[a:b]) ** 2)))
@@ -408,7 +469,7 @@ def correlation(x: np.ndarray, y: np.ndarray, max_lag: int) -> tuple[np.ndarray,
     n = len(x)
     den = n * x.std() * y.std()
     lags = np.arange(-max_lag, max_lag + 1)
-    values = np.array([(x[:n - k] @ y[k:]) if k >= 0 else (x[-k:] @ y[:n + k]) for k in lags])
+    values = np.array([(x[: n - k] @ y[k:]) if k >= 0 else (x[-k:] @ y[: n + k]) for k in lags])
     return lags, values / den if den > 0 else np.zeros(len(lags))
 
 
@@ -421,12 +482,21 @@ def residual_follows(held_out: Dataset, residual: np.ndarray, ok: np.ndarray) ->
     since_start = np.zeros(held_out.n_samples)
     for a, b in held_out.segments:
         since_start[a:b] = np.arange(b - a) * h
-    features = {"the rudder": [held_out.rudder], "the rudder rate": [np.gradient(held_out.rudder, h)],
-                "the turn rate": [r], "the turn rate squared (with its sign)": [r * np.abs(r)],
-                "the heading": [np.cos(held_out.heading), np.sin(held_out.heading),
-                                np.cos(2 * held_out.heading), np.sin(2 * held_out.heading)]
-                if np.ptp(held_out.heading) > np.pi else [held_out.heading],   # a narrow sector: one column
-                "the time since the start of each run (a drift)": [since_start]}
+    features = {
+        "the rudder": [held_out.rudder],
+        "the rudder rate": [np.gradient(held_out.rudder, h)],
+        "the turn rate": [r],
+        "the turn rate squared (with its sign)": [r * np.abs(r)],
+        "the heading": [
+            np.cos(held_out.heading),
+            np.sin(held_out.heading),
+            np.cos(2 * held_out.heading),
+            np.sin(2 * held_out.heading),
+        ]
+        if np.ptp(held_out.heading) > np.pi
+        else [held_out.heading],  # a narrow sector: one column
+        "the time since the start of each run (a drift)": [since_start],
+    }
     if held_out.speed is not None:
         features["the speed"] = [held_out.speed]
     e = residual - residual.mean()
@@ -458,15 +528,25 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
     positive = lags > 0
     auto_out = float(np.mean(np.abs(auto[positive]) > bound))
     cross_out = float(np.mean(np.abs(cross) > bound))
-    rms = float(np.sqrt(np.mean(residual ** 2))) if n else np.inf
+    rms = float(np.sqrt(np.mean(residual**2))) if n else np.inf
     noise = noise_yaw_rate if noise_yaw_rate else noise_level(held_out.yaw_rate, np.radians(0.01))
     ratio = rms / noise if noise > 0 else np.inf
     at_noise = bool(ratio <= NOISE_MARGIN)
-    return {"signal": "yaw_rate", "samples": n, "bound": float(bound), "lag_step": held_out.sample_time,
-            "lags": lags.tolist(), "autocorrelation": auto.tolist(), "cross_correlation_rudder": cross.tolist(),
-            "autocorrelation_outside": auto_out, "cross_correlation_outside": cross_out,
-            "noise_ratio": float(ratio), "follows": follows,
-            "white": auto_out <= 0.1 or at_noise, "independent_of_rudder": cross_out <= 0.1 or at_noise}
+    return {
+        "signal": "yaw_rate",
+        "samples": n,
+        "bound": float(bound),
+        "lag_step": held_out.sample_time,
+        "lags": lags.tolist(),
+        "autocorrelation": auto.tolist(),
+        "cross_correlation_rudder": cross.tolist(),
+        "autocorrelation_outside": auto_out,
+        "cross_correlation_outside": cross_out,
+        "noise_ratio": float(ratio),
+        "follows": follows,
+        "white": auto_out <= 0.1 or at_noise,
+        "independent_of_rudder": cross_out <= 0.1 or at_noise,
+    }
 
 
 def parameter_warnings(estimate: Estimate) -> list[dict]:
@@ -477,20 +557,37 @@ def parameter_warnings(estimate: Estimate) -> list[dict]:
         p = structure.parameter(name)
         value, std = estimate.parameters[name], estimate.std_errors.get(name, np.inf)
         tol = 1e-4 * max(1.0, abs(value))
-        pinned = [(b, side) for b, side in ((p.lower, "lower"), (p.upper, "upper"))
-                  if np.isfinite(b) and abs(value - b) <= tol]
+        pinned = [
+            (b, side)
+            for b, side in ((p.lower, "lower"), (p.upper, "upper"))
+            if np.isfinite(b) and abs(value - b) <= tol
+        ]
         for bound, side in pinned:
-            hint = {("T3", "lower"): " (a rudder delay looks like this)",
-                    ("T", "upper"): COURSE_UNSTABLE, ("T1", "upper"): COURSE_UNSTABLE}.get((name, side), "")
+            hint = {
+                ("T3", "lower"): " (a rudder delay looks like this)",
+                ("T", "upper"): COURSE_UNSTABLE,
+                ("T1", "upper"): COURSE_UNSTABLE,
+            }.get((name, side), "")
             freed_by = FREED_BY.get((name, side))
             hint += f"; {freed_by} would free it" if freed_by else ""
-            out.append({"parameter": name, "value": float(value), "kind": f"at_{side}_bound",
-                        "freed_by": freed_by,
-                        "message": f"{name} is pinned at its {side} bound {bound:g} {p.unit}{hint}"})
+            out.append(
+                {
+                    "parameter": name,
+                    "value": float(value),
+                    "kind": f"at_{side}_bound",
+                    "freed_by": freed_by,
+                    "message": f"{name} is pinned at its {side} bound {bound:g} {p.unit}{hint}",
+                }
+            )
         if not pinned and np.isfinite(std) and std > abs(value):
-            out.append({"parameter": name, "value": float(value), "kind": "poorly_determined",
-                        "message": f"{name} = {value:.4g} {p.unit} is poorly determined "
-                                   f"(std error {std:.2g})"})
+            out.append(
+                {
+                    "parameter": name,
+                    "value": float(value),
+                    "kind": "poorly_determined",
+                    "message": f"{name} = {value:.4g} {p.unit} is poorly determined (std error {std:.2g})",
+                }
+            )
     return out
 
 
@@ -528,16 +625,14 @@ def _fit(structure: Structure, training: Dataset, method: str, nested: dict | No
     bare = structure.with_effects(structure.effect_names[:-1])
     context = StartContext(training, dict(nested), lambda data: estimator.start.fit(bare, data).parameters)
     extra = [dict(start, **s) for s in structure.effects[-1].starts(context)] if structure.effects else []
-    return estimator.refine(structure, training, estimator.start.fit(structure, training),
-                            starts=(start, *extra))
+    return estimator.refine(structure, training, estimator.start.fit(structure, training), starts=(start, *extra))
 
 
-REBASE_GAIN = 0.9      # the model is refitted when a candidate's start lowers its training fit residual this much
+REBASE_GAIN = 0.9  # the model is refitted when a candidate's start lowers its training fit residual this much
 REBASE_AT_NOISE = 1.5  # ... down to the noise (in noise levels): the model then lacked nothing but a start
 
 
-def _rebase(structure: Structure, training: Dataset, method: str, estimate: Estimate,
-            refits: list) -> Estimate | None:
+def _rebase(structure: Structure, training: Dataset, method: str, estimate: Estimate, refits: list) -> Estimate | None:
     """The model itself refitted from the candidates' fits with their effects removed, when its own
     search did not converge and the refit ends with a training fit residual below ``REBASE_GAIN``
     times the first fit's and below ``REBASE_AT_NOISE`` noise levels (None otherwise).
@@ -545,10 +640,17 @@ def _rebase(structure: Structure, training: Dataset, method: str, estimate: Esti
     T3 = 0, a residual five times the noise) that any candidate's extra starting points escape;
     judging the candidates against that minimum would credit them with the base model's failure."""
     estimator = make_estimator(method)
-    starts = [{k: r.parameters[k] for k in structure.parameter_names if k in r.parameters}
-              for r in refits if isinstance(r, Estimate)]
-    if (not isinstance(estimator, OutputError) or not starts or "cost_ratio" not in estimate.info
-            or "oe_not_converged" not in estimate.flags):
+    starts = [
+        {k: r.parameters[k] for k in structure.parameter_names if k in r.parameters}
+        for r in refits
+        if isinstance(r, Estimate)
+    ]
+    if (
+        not isinstance(estimator, OutputError)
+        or not starts
+        or "cost_ratio" not in estimate.info
+        or "oe_not_converged" not in estimate.flags
+    ):
         return None
     refit = estimator.refine(structure, training, estimate, starts=tuple(starts))
     ratio = refit.info["cost_ratio"]
@@ -558,7 +660,7 @@ def _rebase(structure: Structure, training: Dataset, method: str, estimate: Esti
 def _refit_task(args) -> Estimate | str:
     try:
         return _fit(*args)
-    except ValueError as err:   # DataError, StructureError: the effect cannot be fitted to these data
+    except ValueError as err:  # DataError, StructureError: the effect cannot be fitted to these data
         return str(err)
 
 
@@ -579,9 +681,10 @@ def extrapolation(training: Dataset, held_out: Dataset) -> str | None:
     sailed (45 deg sectors); None when they lie within."""
     out = []
     for label, unit, scale, get in (
-            ("speed", "m/s", 1.0, lambda d: d.speed),
-            ("turn rate |r|", "deg/s", np.degrees(1.0), lambda d: np.abs(d.yaw_rate)),
-            ("rudder |delta|", "deg", np.degrees(1.0), lambda d: np.abs(d.rudder))):
+        ("speed", "m/s", 1.0, lambda d: d.speed),
+        ("turn rate |r|", "deg/s", np.degrees(1.0), lambda d: np.abs(d.yaw_rate)),
+        ("rudder |delta|", "deg", np.degrees(1.0), lambda d: np.abs(d.rudder)),
+    ):
         train, held = get(training), get(held_out)
         if train is None or held is None:
             continue
@@ -589,25 +692,46 @@ def extrapolation(training: Dataset, held_out: Dataset) -> str | None:
         margin = EXTRAPOLATION_MARGIN * max(hi - lo, 1e-9)
         h_lo, h_hi = np.percentile(held, [1, 99])
         if h_hi > hi + margin or (label == "speed" and h_lo < lo - margin):
-            out.append(f"held-out {label} {h_lo * scale:.3g}-{h_hi * scale:.3g} {unit} against "
-                       f"{lo * scale:.3g}-{hi * scale:.3g} {unit} in training")
-    sector = (lambda d: set((np.mod(np.degrees(d.heading) + 22.5, 360) // 45).astype(int)))
+            out.append(
+                f"held-out {label} {h_lo * scale:.3g}-{h_hi * scale:.3g} {unit} against "
+                f"{lo * scale:.3g}-{hi * scale:.3g} {unit} in training"
+            )
+
+    def sector(data):
+        return set((np.mod(np.degrees(data.heading) + 22.5, 360) // 45).astype(int))
+
     unseen = sector(held_out) - sector(training)
     if unseen:
-        out.append(f"held-out headings in {len(unseen)} of 8 sectors the training never sailed "
-                   f"({', '.join(SECTORS[k] for k in sorted(unseen))})")
+        out.append(
+            f"held-out headings in {len(unseen)} of 8 sectors the training never sailed "
+            f"({', '.join(SECTORS[k] for k in sorted(unseen))})"
+        )
     return "; ".join(out) or None
 
 
-def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, refit: Estimate | str,
-          training: Dataset | None = None, base_training: FreeRun | None = None) -> Candidate:
+def judge(
+    effect: str,
+    evidence: Evidence,
+    held_out: Dataset,
+    base: FreeRun,
+    refit: Estimate | str,
+    training: Dataset | None = None,
+    base_training: FreeRun | None = None,
+) -> Candidate:
     """A candidate's held-out improvement and its significance against the base model's free runs;
     given ``training`` (cut into free-run windows) and the base model's free runs on it
     (``base_training``), also its gain on the training data, and why (``extrapolation``) it is much
     worse on the held-out data."""
     if isinstance(refit, str):
-        return Candidate(effect, 0.0, False, base.fit["rmse_heading"], base.fit["rmse_yaw_rate"], evidence,
-                         note=f"not fitted: {refit}")
+        return Candidate(
+            effect,
+            0.0,
+            False,
+            base.fit["rmse_heading"],
+            base.fit["rmse_yaw_rate"],
+            evidence,
+            note=f"not fitted: {refit}",
+        )
     run = free_run(refit.structure, refit.parameters, held_out)
     imp_h = _improvement(base.fit["rmse_heading"], run.fit["rmse_heading"])
     imp_r = _improvement(base.fit["rmse_yaw_rate"], run.fit["rmse_yaw_rate"])
@@ -619,16 +743,33 @@ def judge(effect: str, evidence: Evidence, held_out: Dataset, base: FreeRun, ref
         training_gain = _improvement(base_training.fit["rmse_yaw_rate"], fitted.fit["rmse_yaw_rate"])
     significant = bool(imp_r >= MIN_IMPROVEMENT and t >= SIGNIFICANCE_T and training_gain >= MIN_TRAINING_GAIN)
     worse = training is not None and min(imp_h, imp_r) < -MUCH_WORSE
-    return Candidate(effect, float(improvement if np.isfinite(improvement) else -1.0), significant,
-                     run.fit["rmse_heading"], run.fit["rmse_yaw_rate"], evidence,
-                     improvement_heading=imp_h, improvement_yaw_rate=imp_r, t_statistic=t,
-                     signal="heading" if imp_h >= imp_r else "yaw_rate", estimate=refit, fit=run.fit,
-                     extrapolation=extrapolation(training, held_out) if worse else None,
-                     training_gain=float(training_gain))
+    return Candidate(
+        effect,
+        float(improvement if np.isfinite(improvement) else -1.0),
+        significant,
+        run.fit["rmse_heading"],
+        run.fit["rmse_yaw_rate"],
+        evidence,
+        improvement_heading=imp_h,
+        improvement_yaw_rate=imp_r,
+        t_statistic=t,
+        signal="heading" if imp_h >= imp_r else "yaw_rate",
+        estimate=refit,
+        fit=run.fit,
+        extrapolation=extrapolation(training, held_out) if worse else None,
+        training_gain=float(training_gain),
+    )
 
 
-def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str = DEFAULT_METHOD,
-             progress=None, workers: int | None = None, validation: Dataset | None = None) -> Diagnosis:
+def diagnose(
+    dataset: Dataset,
+    model: str = "nomoto2",
+    effects=(),
+    method: str = DEFAULT_METHOD,
+    progress=None,
+    workers: int | None = None,
+    validation: Dataset | None = None,
+) -> Diagnosis:
     """Fit, validate on held-out free runs, locate the failures and rank the missing effects.
 
     By default the first ``TRAINING_FRACTION`` of ``dataset`` trains and the rest is held out;
@@ -653,13 +794,11 @@ def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str =
         validation.check_finite()
         structure.check_data(validation)
         training, rest = dataset, validation
-    say(f"fitting {structure.label()} by {method} on {training.duration:.0f} s, "
-        f"holding out {rest.duration:.0f} s")
-    fits = []   # the effects are added one at a time, each fit also starting from the last
+    say(f"fitting {structure.label()} by {method} on {training.duration:.0f} s, holding out {rest.duration:.0f} s")
+    fits = []  # the effects are added one at a time, each fit also starting from the last
     for count in range(len(structure.effect_names) + 1):
         nested = fits[-1].parameters if fits and isinstance(fits[-1], Estimate) else None
-        fits.append(_refit_task((structure.with_effects(structure.effect_names[:count]), training, method,
-                                 nested)))
+        fits.append(_refit_task((structure.with_effects(structure.effect_names[:count]), training, method, nested)))
     estimate = fits[-1]
     if isinstance(estimate, str):
         raise DataError(f"cannot fit {structure.label()}: {estimate}")
@@ -672,52 +811,92 @@ def diagnose(dataset: Dataset, model: str = "nomoto2", effects=(), method: str =
     names = [name for name in EFFECTS if name not in structure.effect_names]
     evidences = {name: EFFECTS[name].evidence(context) for name in names}
     speed_varies = dataset.speed is not None and np.std(dataset.speed) > MIN_SPEED_VARIATION * abs(
-        np.mean(dataset.speed))
+        np.mean(dataset.speed)
+    )
     fittable = [n for n in names if speed_varies or not EFFECTS[n].needs_speed]
-    say(f"refitting with each of {len(fittable)} candidate effects ({', '.join(fittable)}) "
-        f"on {min(workers, len(fittable))} processes")
-    refits = dict(zip(fittable, _map([(structure.with_effects(structure.effect_names + (n,)), training, method,
-                                       estimate.parameters) for n in fittable], workers)))
+    say(
+        f"refitting with each of {len(fittable)} candidate effects ({', '.join(fittable)}) "
+        f"on {min(workers, len(fittable))} processes"
+    )
+    refits = dict(
+        zip(
+            fittable,
+            _map(
+                [
+                    (structure.with_effects(structure.effect_names + (n,)), training, method, estimate.parameters)
+                    for n in fittable
+                ],
+                workers,
+            ),
+        )
+    )
     rebased = _rebase(structure, training, method, estimate, list(refits.values()))
     if rebased is not None:
-        say(f"the candidates' fits found a better start for {structure.label()} itself: refitted "
+        say(
+            f"the candidates' fits found a better start for {structure.label()} itself: refitted "
             f"(training fit residual {estimate.info['cost_ratio']:.2f} -> {rebased.info['cost_ratio']:.2f} "
-            "noise levels)")
+            "noise levels)"
+        )
         estimate = rebased
         run = free_run(structure, estimate.parameters, held_out)
         context = residual_context(structure, estimate.parameters, dataset)
         evidences = {name: EFFECTS[name].evidence(context) for name in names}
     fitted_windows = windows(training, window)
     fitted_run = free_run(structure, estimate.parameters, fitted_windows)
-    candidates = [judge(n, evidences[n], held_out, run,
-                        refits.get(n, "the speed hardly varies in these data"), fitted_windows, fitted_run)
-                  for n in names]
-    if "low_excitation" in estimate.flags:   # the model itself is poorly determined: no gain is an effect
+    candidates = [
+        judge(
+            n,
+            evidences[n],
+            held_out,
+            run,
+            refits.get(n, "the speed hardly varies in these data"),
+            fitted_windows,
+            fitted_run,
+        )
+        for n in names
+    ]
+    if "low_excitation" in estimate.flags:  # the model itself is poorly determined: no gain is an effect
         for c in candidates:
             if c.significant:
                 c.significant = False
-                c.note = ("would be significant, but the training data excite the yaw too little "
-                          "(low_excitation) to tell an effect from the model's own scatter")
+                c.note = (
+                    "would be significant, but the training data excite the yaw too little "
+                    "(low_excitation) to tell an effect from the model's own scatter"
+                )
     candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
     say("locating the worst segments and testing the residual")
     tc = time_constant(estimate.parameters)
     worst_window = float(np.clip(WORST_WINDOW_TIME_CONSTANTS * tc, *WORST_WINDOW_LIMITS_S))
     if validation is None:
         source = dataset.meta.get("source") or "the record"
-        parts = [(training, [(f"{source} (training)", 0, training.n_samples)], False),
-                 (rest, [(f"{source} (held out)", 0, rest.n_samples)], True)]
+        parts = [
+            (training, [(f"{source} (training)", 0, training.n_samples)], False),
+            (rest, [(f"{source} (held out)", 0, rest.n_samples)], True),
+        ]
     else:
-        parts = [(training, recordings(training, "training"), False),
-                 (rest, recordings(rest, "held-out"), True)]
+        parts = [(training, recordings(training, "training"), False), (rest, recordings(rest, "held-out"), True)]
     worst = worst_segments(parts, structure, estimate.parameters, worst_window, before=before)
-    noise = {"heading": noise_level(dataset.heading, np.radians(0.01)),
-             "yaw_rate": noise_level(dataset.yaw_rate, np.radians(0.01))}
-    return Diagnosis(dataset=dataset, training=training, held_out=held_out, estimate=estimate, run=run,
-                     context=context, candidates=candidates, worst_segments=worst,
-                     residual_tests=residual_tests(held_out, run),
-                     parameter_warnings=parameter_warnings(estimate), noise=noise,
-                     cross_manoeuvre=validation is not None,
-                     before=before, before_run=before_run, evidences=evidences)
+    noise = {
+        "heading": noise_level(dataset.heading, np.radians(0.01)),
+        "yaw_rate": noise_level(dataset.yaw_rate, np.radians(0.01)),
+    }
+    return Diagnosis(
+        dataset=dataset,
+        training=training,
+        held_out=held_out,
+        estimate=estimate,
+        run=run,
+        context=context,
+        candidates=candidates,
+        worst_segments=worst,
+        residual_tests=residual_tests(held_out, run),
+        parameter_warnings=parameter_warnings(estimate),
+        noise=noise,
+        cross_manoeuvre=validation is not None,
+        before=before,
+        before_run=before_run,
+        evidences=evidences,
+    )
 
 
 def signal_table(diagnosis: Diagnosis) -> list[dict]:
@@ -725,7 +904,9 @@ def signal_table(diagnosis: Diagnosis) -> list[dict]:
     rows = []
     runs = [("now", diagnosis.run)] + ([("before", diagnosis.before_run)] if diagnosis.before_run else [])
     for label, run in runs:
-        for signal, measured, model in (("heading", diagnosis.held_out.heading, run.heading),
-                                        ("yaw_rate", diagnosis.held_out.yaw_rate, run.yaw_rate)):
+        for signal, measured, model in (
+            ("heading", diagnosis.held_out.heading, run.heading),
+            ("yaw_rate", diagnosis.held_out.yaw_rate, run.yaw_rate),
+        ):
             rows.append(dict(signal_metrics(measured, model), model=label, signal=signal))
     return rows

@@ -14,10 +14,11 @@ parameters (SI units), and hooks that say how it acts
 Every hook has a neutral default, so a new effect writes only what it
 changes. Register it with ``register_effect`` (see README, "Adding an effect").
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 
@@ -34,7 +35,7 @@ class Parameter:
     initial: float = 0.0
     lower: float = -np.inf
     upper: float = np.inf
-    display_unit: str = ""     # e.g. "deg" for angles shown to people
+    display_unit: str = ""  # e.g. "deg" for angles shown to people
     display_scale: float = 1.0  # SI value * display_scale = display value
 
 
@@ -153,10 +154,11 @@ class Effect:
 
 class RudderOffset(Effect):
     name = "rudder_offset"
-    explanation = ("the boat holds a turn with the rudder at zero: a constant yaw moment "
-                   "(rudder misalignment, propeller asymmetry) worth a fixed rudder angle")
-    parameters = (Parameter("delta_r", "rad", "equivalent rudder offset", 0.0, -0.35, 0.35,
-                            "deg", np.degrees(1.0)),)
+    explanation = (
+        "the boat holds a turn with the rudder at zero: a constant yaw moment "
+        "(rudder misalignment, propeller asymmetry) worth a fixed rudder angle"
+    )
+    parameters = (Parameter("delta_r", "rad", "equivalent rudder offset", 0.0, -0.35, 0.35, "deg", np.degrees(1.0)),)
 
     def effective_rudder(self, time, rudder, p):
         return rudder + p["delta_r"]
@@ -171,22 +173,29 @@ class RudderOffset(Effect):
         e = context.equation_residual
         t = float(np.mean(e) / (np.std(e) / np.sqrt(max(context.effective_samples, 1)) + 1e-12))
         side = "starboard" if np.mean(e) > 0 else "port"
-        return Evidence(abs(t), f"the model's yaw-rate error has a steady bias to {side} "
-                        f"(t = {t:.1f}): a constant turning moment the rudder does not explain",
-                        context.signals.delta, "rudder (deg)", np.degrees(1.0))
+        return Evidence(
+            abs(t),
+            f"the model's yaw-rate error has a steady bias to {side} "
+            f"(t = {t:.1f}): a constant turning moment the rudder does not explain",
+            context.signals.delta,
+            "rudder (deg)",
+            np.degrees(1.0),
+        )
 
 
 class CubicYaw(Effect):
     name = "cubic_yaw"
-    explanation = ("the boat's resistance to turning changes in tight turns: yaw damping grows "
-                   "(or shrinks) with the cube of the turn rate")
+    explanation = (
+        "the boat's resistance to turning changes in tight turns: yaw damping grows "
+        "(or shrinks) with the cube of the turn rate"
+    )
     parameters = (Parameter("alpha", "s^2/rad^2", "cubic yaw damping coefficient", 0.0, -1e7, 1e7),)
 
     def forcing_terms(self, p):
         return [ForcingTerm(-p["alpha"], r_power=3)]
 
     def regressors(self, signals):
-        return {"r^3": signals.r ** 3}
+        return {"r^3": signals.r**3}
 
     def from_coefficients(self, coefficients, base):
         return {"alpha": -coefficients["r^3"]}
@@ -199,21 +208,26 @@ class CubicYaw(Effect):
         diverges); the limit is the data's, not the sign's (seed 001's own alpha is negative)."""
         r_max = float(np.max(np.abs(dataset.yaw_rate))) if dataset.n_samples else 0.0
         alpha = self.parameters[0]
-        lower = max(alpha.lower, -1.0 / (3.0 * r_max ** 2)) if r_max > 0 else alpha.lower
+        lower = max(alpha.lower, -1.0 / (3.0 * r_max**2)) if r_max > 0 else alpha.lower
         return {"alpha": (lower, alpha.upper)}
 
     def evidence(self, context):
-        c = _partial_corr(context.equation_residual, context.signals.r ** 3, [context.signals.r])
-        return Evidence(abs(c) * np.sqrt(context.effective_samples),
-                        f"the error grows with the turn rate cubed (correlation {c:+.2f}): "
-                        "damping is not linear in tight turns",
-                        context.signals.r, "yaw rate (deg/s)", np.degrees(1.0))
+        c = _partial_corr(context.equation_residual, context.signals.r**3, [context.signals.r])
+        return Evidence(
+            abs(c) * np.sqrt(context.effective_samples),
+            f"the error grows with the turn rate cubed (correlation {c:+.2f}): damping is not linear in tight turns",
+            context.signals.r,
+            "yaw rate (deg/s)",
+            np.degrees(1.0),
+        )
 
 
 class RudderDelay(Effect):
     name = "rudder_delay"
-    explanation = ("the hull answers the rudder later than the rudder sensor says: a dead time "
-                   "in the steering gear, the sensor or the data link")
+    explanation = (
+        "the hull answers the rudder later than the rudder sensor says: a dead time "
+        "in the steering gear, the sensor or the data link"
+    )
     parameters = (Parameter("tau", "s", "rudder dead time", 0.05, 0.0, 5.0),)
 
     def effective_rudder(self, time, rudder, p):
@@ -233,36 +247,53 @@ class RudderDelay(Effect):
         return out
 
     def evidence(self, context):
-        c = _partial_corr(context.equation_residual, -context.signals.delta_dot,
-                          [context.signals.delta])
+        c = _partial_corr(context.equation_residual, -context.signals.delta_dot, [context.signals.delta])
         note = ""
         if context.parameters.get("T3", 1.0) <= 1e-6 or context.parameters.get("T3", 1.0) < 0:
             note = "; T3 is pinned at its bound 0, which is what a delay looks like"
-        return Evidence(max(c, 0.0) * np.sqrt(context.effective_samples),
-                        f"the error follows the rudder rate with the sign of a lag "
-                        f"(correlation {c:+.2f}){note}: the hull answers later than the sensor says",
-                        context.signals.delta_dot, "rudder rate (deg/s)", np.degrees(1.0))
+        return Evidence(
+            max(c, 0.0) * np.sqrt(context.effective_samples),
+            f"the error follows the rudder rate with the sign of a lag "
+            f"(correlation {c:+.2f}){note}: the hull answers later than the sensor says",
+            context.signals.delta_dot,
+            "rudder rate (deg/s)",
+            np.degrees(1.0),
+        )
 
 
 class WindYaw(Effect):
     name = "wind_yaw"
-    explanation = ("a steady wind or current turns the bow depending on the heading: the boat "
-                   "needs different rudder on different courses")
+    explanation = (
+        "a steady wind or current turns the bow depending on the heading: the boat "
+        "needs different rudder on different courses"
+    )
     parameters = tuple(
-        Parameter(f"wind_{kind}{k}", "rad/s", f"{kind} harmonic {k} of heading of the wind/current yaw forcing",
-                  0.0, -1.0, 1.0)
-        for k in (1, 2) for kind in ("c", "s"))
+        Parameter(
+            f"wind_{kind}{k}",
+            "rad/s",
+            f"{kind} harmonic {k} of heading of the wind/current yaw forcing",
+            0.0,
+            -1.0,
+            1.0,
+        )
+        for k in (1, 2)
+        for kind in ("c", "s")
+    )
 
     def forcing_terms(self, p):
-        return [ForcingTerm(p[f"wind_c{k}"], harmonic=k, trig=TRIG_COS) for k in (1, 2)] + \
-               [ForcingTerm(p[f"wind_s{k}"], harmonic=k, trig=TRIG_SIN) for k in (1, 2)]
+        return [ForcingTerm(p[f"wind_c{k}"], harmonic=k, trig=TRIG_COS) for k in (1, 2)] + [
+            ForcingTerm(p[f"wind_s{k}"], harmonic=k, trig=TRIG_SIN) for k in (1, 2)
+        ]
 
     def regressors(self, signals):
         return {f"{f.__name__}({k}psi)": f(k * signals.psi) for k in (1, 2) for f in (np.cos, np.sin)}
 
     def from_coefficients(self, coefficients, base):
-        return {f"wind_{'c' if f == 'cos' else 's'}{k}": coefficients[f"{f}({k}psi)"]
-                for k in (1, 2) for f in ("cos", "sin")}
+        return {
+            f"wind_{'c' if f == 'cos' else 's'}{k}": coefficients[f"{f}({k}psi)"]
+            for k in (1, 2)
+            for f in ("cos", "sin")
+        }
 
     def evidence(self, context):
         e = context.equation_residual
@@ -271,20 +302,25 @@ class WindYaw(Effect):
         C = C - C.mean(axis=0)
         e0 = e - e.mean()
         coef = np.linalg.lstsq(C, e0, rcond=None)[0]
-        r2 = 1 - np.sum((e0 - C @ coef) ** 2) / max(np.sum(e0 ** 2), 1e-30)
+        r2 = 1 - np.sum((e0 - C @ coef) ** 2) / max(np.sum(e0**2), 1e-30)
         spread = np.ptp(np.mod(psi, 2 * np.pi)) if len(psi) else 0.0
-        return Evidence(r2 * np.sqrt(context.effective_samples) * min(1.0, spread / np.pi),
-                        f"the error depends on the heading ({100 * r2:.0f} % of it explained by "
-                        "heading harmonics): a steady wind or current pushes the bow",
-                        np.mod(psi, 2 * np.pi), "heading (deg)", np.degrees(1.0))
+        return Evidence(
+            r2 * np.sqrt(context.effective_samples) * min(1.0, spread / np.pi),
+            f"the error depends on the heading ({100 * r2:.0f} % of it explained by "
+            "heading harmonics): a steady wind or current pushes the bow",
+            np.mod(psi, 2 * np.pi),
+            "heading (deg)",
+            np.degrees(1.0),
+        )
 
 
 class GyroBias(Effect):
     name = "gyro_bias"
-    explanation = ("the rate gyro reads a small turn when the boat goes straight: its yaw rate "
-                   "disagrees with how fast the compass heading actually changes")
-    parameters = (Parameter("r_bias", "rad/s", "yaw-rate sensor bias", 0.0, -0.2, 0.2,
-                            "deg/s", np.degrees(1.0)),)
+    explanation = (
+        "the rate gyro reads a small turn when the boat goes straight: its yaw rate "
+        "disagrees with how fast the compass heading actually changes"
+    )
+    parameters = (Parameter("r_bias", "rad/s", "yaw-rate sensor bias", 0.0, -0.2, 0.2, "deg/s", np.degrees(1.0)),)
 
     def measured_yaw_rate(self, yaw_rate, p):
         return yaw_rate + p["r_bias"]
@@ -300,21 +336,27 @@ class GyroBias(Effect):
     def evidence(self, context):
         d = context.signals.r_measured - context.signals.heading_rate
         t = float(np.mean(d) / (np.std(d) / np.sqrt(max(context.effective_samples, 1)) + 1e-12))
-        return Evidence(abs(t), f"the gyro's yaw rate and the heading's rate of change differ "
-                        f"by {np.degrees(np.mean(d)):+.3f} deg/s on average (t = {t:.1f})",
-                        context.signals.r, "yaw rate (deg/s)", np.degrees(1.0), residual=d)
+        return Evidence(
+            abs(t),
+            f"the gyro's yaw rate and the heading's rate of change differ "
+            f"by {np.degrees(np.mean(d)):+.3f} deg/s on average (t = {t:.1f})",
+            context.signals.r,
+            "yaw rate (deg/s)",
+            np.degrees(1.0),
+            residual=d,
+        )
 
 
 class SpeedDependence(Effect):
     name = "speed_dependence"
-    explanation = ("the boat steers differently at different speeds: the rudder is stronger and "
-                   "the hull answers faster when it goes faster")
+    explanation = (
+        "the boat steers differently at different speeds: the rudder is stronger and "
+        "the hull answers faster when it goes faster"
+    )
     needs_speed = True
     parameters = (
-        Parameter("U_ref", "m/s", "reference speed at which K and T hold (fixed: median speed)",
-                  1.0, 0.0, np.inf),
-        Parameter("n_K", "-", "exponent of K in U/U_ref (1: K ~ U, the non-dimensional Nomoto form)",
-                  1.0, 0.0, 2.0),
+        Parameter("U_ref", "m/s", "reference speed at which K and T hold (fixed: median speed)", 1.0, 0.0, np.inf),
+        Parameter("n_K", "-", "exponent of K in U/U_ref (1: K ~ U, the non-dimensional Nomoto form)", 1.0, 0.0, 2.0),
         Parameter("n_T", "-", "exponent of the time constants in U_ref/U (1: T ~ 1/U)", 1.0, 0.0, 2.0),
     )
     fixed = ("U_ref",)
@@ -344,23 +386,35 @@ class SpeedDependence(Effect):
         s = context.signals
         feature = (s.speed - np.median(s.speed)) * s.delta
         c = _partial_corr(context.equation_residual, feature, [s.delta])
-        return Evidence(abs(c) * np.sqrt(context.effective_samples),
-                        f"the error follows rudder times speed change (correlation {c:+.2f}): "
-                        "the rudder's effect changes with speed",
-                        feature, "rudder x speed change (deg m/s)", np.degrees(1.0))
+        return Evidence(
+            abs(c) * np.sqrt(context.effective_samples),
+            f"the error follows rudder times speed change (correlation {c:+.2f}): "
+            "the rudder's effect changes with speed",
+            feature,
+            "rudder x speed change (deg m/s)",
+            np.degrees(1.0),
+        )
 
 
-T_UPPER_BOUND = 1e3   # s, the base models' upper bound on T and T1 (structure.BASE_MODELS)
+T_UPPER_BOUND = 1e3  # s, the base models' upper bound on T and T1 (structure.BASE_MODELS)
 
 
 class CourseInstability(Effect):
     name = "course_instability"
-    explanation = ("the ship does not hold a straight course by itself: left alone it turns one way "
-                   "or the other (negative linear yaw damping), and only the growing damping of a "
-                   "faster turn keeps the turn bounded")
+    explanation = (
+        "the ship does not hold a straight course by itself: left alone it turns one way "
+        "or the other (negative linear yaw damping), and only the growing damping of a "
+        "faster turn keeps the turn bounded"
+    )
     parameters = (
-        Parameter("n1", "-", "linear yaw damping relative to the Nomoto model's (1: as the model; "
-                  "below 0: course-unstable)", 1.0, -3.0, 3.0),
+        Parameter(
+            "n1",
+            "-",
+            "linear yaw damping relative to the Nomoto model's (1: as the model; below 0: course-unstable)",
+            1.0,
+            -3.0,
+            3.0,
+        ),
         Parameter("n3", "s^2/rad^2", "cubic yaw damping that bounds the unstable turn", 0.0, 0.0, 1e7),
     )
 
@@ -379,25 +433,31 @@ class CourseInstability(Effect):
         where the simulation diverges, so it also starts from n1 = 0.5, 0, -0.25 and -0.5 with
         the cubic damping that holds the unstable turn at about half the largest measured rate."""
         r_max = float(np.max(np.abs(context.training.yaw_rate))) or 1e-3
-        return [dict(context.nested, n1=n1, n3=max(-n1, 0.05) / (0.5 * r_max) ** 2)
-                for n1 in (0.5, 0.0, -0.25, -0.5)]
+        return [dict(context.nested, n1=n1, n3=max(-n1, 0.05) / (0.5 * r_max) ** 2) for n1 in (0.5, 0.0, -0.25, -0.5)]
 
     def evidence(self, context):
         s = context.signals
         c = _partial_corr(context.equation_residual, s.r, [s.delta])
         pinned = max(context.parameters.get("T", 0.0), context.parameters.get("T1", 0.0)) >= 0.999 * T_UPPER_BOUND
-        note = "; the time constant sits on its upper bound, which is what course instability looks like" \
-            if pinned else ""
-        return Evidence((abs(c) + (1.0 if pinned else 0.0)) * np.sqrt(context.effective_samples),
-                        f"the error follows the turn rate itself (correlation {c:+.2f}){note}: "
-                        "the linear yaw damping is not what the model assumes",
-                        s.r, "yaw rate (deg/s)", np.degrees(1.0))
+        note = (
+            "; the time constant sits on its upper bound, which is what course instability looks like" if pinned else ""
+        )
+        return Evidence(
+            (abs(c) + (1.0 if pinned else 0.0)) * np.sqrt(context.effective_samples),
+            f"the error follows the turn rate itself (correlation {c:+.2f}){note}: "
+            "the linear yaw damping is not what the model assumes",
+            s.r,
+            "yaw rate (deg/s)",
+            np.degrees(1.0),
+        )
 
 
 class QuadraticYaw(Effect):
     name = "quadratic_yaw"
-    explanation = ("the hull's resistance to turning grows with the square of the turn rate "
-                   "(cross-flow drag, as on small fast boats)")
+    explanation = (
+        "the hull's resistance to turning grows with the square of the turn rate "
+        "(cross-flow drag, as on small fast boats)"
+    )
     parameters = (Parameter("d_q", "s/rad", "quadratic yaw damping: forcing -d_q r|r|", 0.0, -1e4, 1e4),)
 
     def forcing_terms(self, p):
@@ -412,36 +472,47 @@ class QuadraticYaw(Effect):
     def evidence(self, context):
         s = context.signals
         c = _partial_corr(context.equation_residual, s.r * np.abs(s.r), [s.r])
-        return Evidence(abs(c) * np.sqrt(context.effective_samples),
-                        f"the error grows with the turn rate squared, with its sign (correlation {c:+.2f}): "
-                        "the hull's turning resistance is quadratic",
-                        s.r, "yaw rate (deg/s)", np.degrees(1.0))
+        return Evidence(
+            abs(c) * np.sqrt(context.effective_samples),
+            f"the error grows with the turn rate squared, with its sign (correlation {c:+.2f}): "
+            "the hull's turning resistance is quadratic",
+            s.r,
+            "yaw rate (deg/s)",
+            np.degrees(1.0),
+        )
 
 
 class RudderStall(Effect):
     name = "rudder_stall"
-    explanation = ("the rudder turns the boat less than proportionally at large angles: the flow "
-                   "over it separates (stall) or its lift saturates")
-    parameters = (Parameter("c_stall", "1/rad^2", "rudder moment loss: acting rudder d (1 - c_stall d^2)",
-                            0.0, -1.0, 0.9),)
+    explanation = (
+        "the rudder turns the boat less than proportionally at large angles: the flow "
+        "over it separates (stall) or its lift saturates"
+    )
+    parameters = (
+        Parameter("c_stall", "1/rad^2", "rudder moment loss: acting rudder d (1 - c_stall d^2)", 0.0, -1.0, 0.9),
+    )
 
     def effective_rudder(self, time, rudder, p):
         """Lift that grows less than linearly; c_stall < 0.9 keeps it increasing up to 35 deg."""
-        return rudder * (1.0 - p["c_stall"] * rudder ** 2)
+        return rudder * (1.0 - p["c_stall"] * rudder**2)
 
     def regressors(self, signals):
-        return {"delta^3": signals.delta ** 3}
+        return {"delta^3": signals.delta**3}
 
     def from_coefficients(self, coefficients, base):
         return {"c_stall": -coefficients["delta^3"] / base["K"] if base["K"] else 0.0}
 
     def evidence(self, context):
         s = context.signals
-        c = _partial_corr(context.equation_residual, s.delta ** 3, [s.delta])
-        return Evidence(abs(c) * np.sqrt(context.effective_samples),
-                        f"the error follows the rudder angle cubed (correlation {c:+.2f}): the rudder's "
-                        "moment does not grow in proportion at large angles",
-                        s.delta, "rudder (deg)", np.degrees(1.0))
+        c = _partial_corr(context.equation_residual, s.delta**3, [s.delta])
+        return Evidence(
+            abs(c) * np.sqrt(context.effective_samples),
+            f"the error follows the rudder angle cubed (correlation {c:+.2f}): the rudder's "
+            "moment does not grow in proportion at large angles",
+            s.delta,
+            "rudder (deg)",
+            np.degrees(1.0),
+        )
 
 
 EFFECTS: dict[str, Effect] = {}
@@ -455,6 +526,15 @@ def register_effect(effect: Effect) -> Effect:
     return effect
 
 
-for _effect in (RudderOffset(), CubicYaw(), RudderDelay(), WindYaw(), GyroBias(), SpeedDependence(),
-                CourseInstability(), QuadraticYaw(), RudderStall()):
+for _effect in (
+    RudderOffset(),
+    CubicYaw(),
+    RudderDelay(),
+    WindYaw(),
+    GyroBias(),
+    SpeedDependence(),
+    CourseInstability(),
+    QuadraticYaw(),
+    RudderStall(),
+):
     register_effect(_effect)

@@ -24,6 +24,7 @@ against time) goes to ``--plot-dir``, or next to the table. Bag times that
 look like Unix time (after 2001) are plotted as dates; simulated bags that
 all start near 0 s are laid end to end in the order given.
 """
+
 from __future__ import annotations
 
 import concurrent.futures
@@ -66,9 +67,9 @@ class BagResult:
     job: BagJob
     rows: list = field(default_factory=list)
     refits: int = 0
-    bag_seconds: float = 0.0     # s of bag time covered
-    read_seconds: float = 0.0    # wall s to read the bag (and set up)
-    loop_seconds: float = 0.0    # wall s of the identification loop
+    bag_seconds: float = 0.0  # s of bag time covered
+    read_seconds: float = 0.0  # wall s to read the bag (and set up)
+    loop_seconds: float = 0.0  # wall s of the identification loop
     error: str = ""
 
 
@@ -92,12 +93,16 @@ def identify_bag(job: BagJob) -> BagResult:
 
 def table_row(job: BagJob, record: dict) -> dict:
     """One CSV row of an accepted estimate (the ``~/estimate`` record)."""
-    row = {"vessel": job.vessel, "bag": job.bag, "time": record["stamp"],
-           "window_start": record["estimate_window"]["start"], "window_end": record["estimate_window"]["end"]}
+    row = {
+        "vessel": job.vessel,
+        "bag": job.bag,
+        "time": record["stamp"],
+        "window_start": record["estimate_window"]["start"],
+        "window_end": record["estimate_window"]["end"],
+    }
     row.update(record["parameters"])
     row.update({f"{name}_std": value for name, value in record["std_errors"].items()})
-    row.update({f"fit_{name}": value for name, value in record["fit"].items()
-                if isinstance(value, (int, float))})
+    row.update({f"fit_{name}": value for name, value in record["fit"].items() if isinstance(value, (int, float))})
     return row
 
 
@@ -112,27 +117,43 @@ def vessel_of(bag: str, rule: str = "parent") -> str:
         return path.stem.split("_", 1)[0]
     match = re.search(rule, str(path))
     if not match or not match.groups():
-        raise FleetError(f"--vessel-from {rule!r} has no match with a group in {path}; "
-                           "use parent, prefix or a regular expression with one (group)")
+        raise FleetError(
+            f"--vessel-from {rule!r} has no match with a group in {path}; "
+            "use parent, prefix or a regular expression with one (group)"
+        )
     return match.group(1)
 
 
 def add_fleet_arguments(parser) -> None:
     """The many-bag options of ``ship-ident replay``."""
     group = parser.add_argument_group("many bags (fleet)")
-    group.add_argument("--jobs", type=int, default=1, metavar="N",
-                       help="bags replayed in parallel by N local processes (or N local Dask workers)")
-    group.add_argument("--dask", metavar="ADDRESS",
-                       help="run the bags on a Dask scheduler (tcp://host:8786), or 'local' for a local "
-                            "Dask cluster of --jobs workers (needs dask[distributed])")
-    group.add_argument("--table", metavar="OUT.csv",
-                       help="write one row per accepted estimate: vessel, bag, time, parameters, "
-                            "std errors, fit figures (SI); drift plots go next to it")
-    group.add_argument("--plot-dir", metavar="DIR",
-                       help="write a drift plot per vessel (drift_VESSEL.png) here")
-    group.add_argument("--vessel-from", default="parent", metavar="RULE",
-                       help="vessel of a bag: 'parent' (its directory's name, default), 'prefix' (its "
-                            "name up to the first '_'), or a regular expression whose first group is it")
+    group.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="bags replayed in parallel by N local processes (or N local Dask workers)",
+    )
+    group.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="run the bags on a Dask scheduler (tcp://host:8786), or 'local' for a local "
+        "Dask cluster of --jobs workers (needs dask[distributed])",
+    )
+    group.add_argument(
+        "--table",
+        metavar="OUT.csv",
+        help="write one row per accepted estimate: vessel, bag, time, parameters, "
+        "std errors, fit figures (SI); drift plots go next to it",
+    )
+    group.add_argument("--plot-dir", metavar="DIR", help="write a drift plot per vessel (drift_VESSEL.png) here")
+    group.add_argument(
+        "--vessel-from",
+        default="parent",
+        metavar="RULE",
+        help="vessel of a bag: 'parent' (its directory's name, default), 'prefix' (its "
+        "name up to the first '_'), or a regular expression whose first group is it",
+    )
 
 
 def run_fleet(args, bags: list[str], topics: Topics, config: OnlineConfig) -> int:
@@ -151,9 +172,17 @@ def run_fleet(args, bags: list[str], topics: Topics, config: OnlineConfig) -> in
     plot_dir = args.plot_dir or (str(Path(args.table).parent) if args.table else None)
     plots = plot_drift(rows, plot_dir) if plot_dir and rows else []
     rate = 60.0 * len(results) / max(wall, 1e-9)
-    summary = {"bags": len(results), "failed": len(failed), "rows": len(rows), "wall_seconds": wall,
-               "bags_per_minute": rate, "bag_hours": sum(r.bag_seconds for r in results) / 3600.0,
-               "table": args.table, "plots": plots, "vessels": vessel_summary(rows)}
+    summary = {
+        "bags": len(results),
+        "failed": len(failed),
+        "rows": len(rows),
+        "wall_seconds": wall,
+        "bags_per_minute": rate,
+        "bag_hours": sum(r.bag_seconds for r in results) / 3600.0,
+        "table": args.table,
+        "plots": plots,
+        "vessels": vessel_summary(rows),
+    }
     if args.json:
         print(dumps_json(summary))
     else:
@@ -167,11 +196,16 @@ def identify_bags(jobs: list[BagJob], workers: int = 1, dask: str | None = None)
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError:
-            raise FleetError("--dask needs dask.distributed: pip install 'dask[distributed]' "
-                               "(or the ship_ident[bench] extra)") from None
+            raise FleetError(
+                "--dask needs dask.distributed: pip install 'dask[distributed]' (or the ship_ident[bench] extra)"
+            ) from None
         if dask == "local":
-            with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                              dashboard_address=None) as cluster, Client(cluster) as client:
+            with (
+                LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+                ) as cluster,
+                Client(cluster) as client,
+            ):
                 return _run(jobs, client.get_executor())
         with Client(dask) as client:
             return _run(jobs, client.get_executor())
@@ -193,12 +227,17 @@ def _run(jobs: list[BagJob], executor) -> list[BagResult]:
         if result.error:
             status = f"FAILED: {result.error}"
         else:
-            status = (f"{len(result.rows)} estimates from {result.refits} refits over "
-                      f"{result.bag_seconds:.0f} s ({result.bag_seconds / max(result.loop_seconds, 1e-9):.0f}x "
-                      "real time)")
+            status = (
+                f"{len(result.rows)} estimates from {result.refits} refits over "
+                f"{result.bag_seconds:.0f} s ({result.bag_seconds / max(result.loop_seconds, 1e-9):.0f}x "
+                "real time)"
+            )
         elapsed = time.perf_counter() - start
-        print(f"[{done}/{len(jobs)} bags, {60.0 * done / max(elapsed, 1e-9):.1f} bags/min] {name}: {status}",
-              file=sys.stderr, flush=True)
+        print(
+            f"[{done}/{len(jobs)} bags, {60.0 * done / max(elapsed, 1e-9):.1f} bags/min] {name}: {status}",
+            file=sys.stderr,
+            flush=True,
+        )
 
     if executor is None:
         for job in jobs:
@@ -237,6 +276,7 @@ def vessel_summary(rows: list[dict]) -> dict:
 def plot_drift(rows: list[dict], plot_dir: str) -> list[str]:
     """A PNG per vessel: K and T1 (or T) with 1.96-std error bars against time. Returns the paths."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -263,8 +303,9 @@ def plot_drift(rows: list[dict], plot_dir: str) -> list[str]:
             unit = "1/s" if name == "K" else "s"
             ax.set_ylabel(f"{name} ({unit})")
             ax.grid(alpha=0.3)
-        axes[0, 0].set_title(f"{vessel}: {len(mine)} estimates from {len({r['bag'] for r in mine})} bags "
-                             "(error bars 1.96 std)")
+        axes[0, 0].set_title(
+            f"{vessel}: {len(mine)} estimates from {len({r['bag'] for r in mine})} bags (error bars 1.96 std)"
+        )
         axes[-1, 0].set_xlabel("time (UTC)" if dated else "hours of bag time, bags end to end")
         fig.tight_layout()
         path = str(Path(plot_dir) / f"drift_{re.sub(r'[^A-Za-z0-9_.-]', '_', vessel)}.png")
@@ -276,9 +317,11 @@ def plot_drift(rows: list[dict], plot_dir: str) -> list[str]:
 
 def print_summary(summary: dict) -> None:
     """Per-vessel medians and the throughput, for people."""
-    print(f"{summary['bags']} bags ({summary['bag_hours']:.2f} h of data) in {summary['wall_seconds']:.1f} s: "
-          f"{summary['bags_per_minute']:.1f} bags/min; {summary['rows']} accepted estimates"
-          + (f"; {summary['failed']} bags failed (see above)" if summary["failed"] else ""))
+    print(
+        f"{summary['bags']} bags ({summary['bag_hours']:.2f} h of data) in {summary['wall_seconds']:.1f} s: "
+        f"{summary['bags_per_minute']:.1f} bags/min; {summary['rows']} accepted estimates"
+        + (f"; {summary['failed']} bags failed (see above)" if summary["failed"] else "")
+    )
     for vessel, s in summary["vessels"].items():
         medians = ", ".join(f"{k[7:]} {v:.4g}" for k, v in s.items() if k.startswith("median_"))
         print(f"  {vessel}: {s['estimates']} estimates from {s['bags']} bags; median {medians}")

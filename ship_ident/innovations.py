@@ -20,6 +20,7 @@ white innovations e_k with covariance S; ``whiten`` returns S^-1/2 e_k.
 The prediction-error estimator and the Cramer-Rao bound with a noisy rudder
 both stand on this model.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -30,17 +31,22 @@ from scipy.linalg import solve_discrete_are
 
 from .integrate import advance
 
-_NO_FORCING = (np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
-               np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+_NO_FORCING = (
+    np.zeros(0),
+    np.zeros(0, dtype=np.int64),
+    np.zeros(0, dtype=np.int64),
+    np.zeros(0, dtype=np.int64),
+    np.zeros(0, dtype=np.int64),
+)
 
 
 @dataclass(frozen=True)
 class NoiseModel:
     """The linearised hull driven by rudder noise (see the module docstring; SI units)."""
 
-    A: np.ndarray        # one-sample transition of (psi, r[, z])
-    b0: np.ndarray       # state response to a unit rudder error at the start of a sample (FOH)
-    b1: np.ndarray       # ... at its end
+    A: np.ndarray  # one-sample transition of (psi, r[, z])
+    b0: np.ndarray  # state response to a unit rudder error at the start of a sample (FOH)
+    b1: np.ndarray  # ... at its end
     rudder_noise: float  # rad
     heading_noise: float  # rad
     yaw_rate_noise: float  # rad/s
@@ -58,8 +64,9 @@ class NoiseModel:
         return np.einsum("ij,wjk,wk->wi", self.C, resolvent, drive)
 
 
-def noise_model(order: int, params: dict, h: float, substeps: int, rudder_noise: float,
-                heading_noise: float, yaw_rate_noise: float) -> NoiseModel:
+def noise_model(
+    order: int, params: dict, h: float, substeps: int, rudder_noise: float, heading_noise: float, yaw_rate_noise: float
+) -> NoiseModel:
     """Linearise the compiled integrator at rest (exact: the model is linear there) for one
     sample of length h (s)."""
     K = params["K"]
@@ -74,8 +81,14 @@ def noise_model(order: int, params: dict, h: float, substeps: int, rudder_noise:
 
     zero = np.zeros(n)
     A = np.column_stack([step(np.eye(n)[i], 0.0, 0.0) for i in range(n)])
-    return NoiseModel(A=A, b0=step(zero, 1.0, 0.0), b1=step(zero, 0.0, 1.0), rudder_noise=rudder_noise,
-                      heading_noise=heading_noise, yaw_rate_noise=yaw_rate_noise)
+    return NoiseModel(
+        A=A,
+        b0=step(zero, 1.0, 0.0),
+        b1=step(zero, 0.0, 1.0),
+        rudder_noise=rudder_noise,
+        heading_noise=heading_noise,
+        yaw_rate_noise=yaw_rate_noise,
+    )
 
 
 @dataclass(frozen=True)
@@ -96,19 +109,19 @@ class InnovationFilter:
 def innovation_filter(model: NoiseModel) -> InnovationFilter:
     """Solve the filter Riccati equation of the correlated-noise model (scipy's DARE, cross term s)."""
     A, C, n = model.A, model.C, model.A.shape[0]
-    s2 = model.rudder_noise ** 2
+    s2 = model.rudder_noise**2
     g = A @ model.b1 + model.b0
     feedthrough = C @ model.b1
-    R = np.diag([model.heading_noise ** 2, model.yaw_rate_noise ** 2]) + s2 * np.outer(feedthrough, feedthrough)
+    R = np.diag([model.heading_noise**2, model.yaw_rate_noise**2]) + s2 * np.outer(feedthrough, feedthrough)
     cross = s2 * np.outer(g, feedthrough)
-    if s2 == 0.0:   # sensor noise only: no state to track, the innovations are the errors
+    if s2 == 0.0:  # sensor noise only: no state to track, the innovations are the errors
         P = np.zeros((n, n))
     else:
         P = solve_discrete_are(A.T, C.T, s2 * np.outer(g, g) + 1e-14 * np.eye(n), R, s=cross)
     S = C @ P @ C.T + R
     gain = (A @ P @ C.T + cross) @ np.linalg.inv(S)
     evals, evecs = np.linalg.eigh(S)
-    return InnovationFilter(A=A, gain=gain, C=C, s_inv_sqrt=evecs @ np.diag(evals ** -0.5) @ evecs.T)
+    return InnovationFilter(A=A, gain=gain, C=C, s_inv_sqrt=evecs @ np.diag(evals**-0.5) @ evecs.T)
 
 
 @njit(cache=True)
@@ -133,8 +146,9 @@ def _whiten(A, gain, C, s_inv_sqrt, errors):
     return out
 
 
-def spectral_fisher_information(model: NoiseModel, slopes: list, n_samples: int,
-                                n_frequencies: int = 4096) -> np.ndarray:
+def spectral_fisher_information(
+    model: NoiseModel, slopes: list, n_samples: int, n_frequencies: int = 4096
+) -> np.ndarray:
     """Whittle's Fisher information carried by the noise's spectrum alone,
 
         F_ij = (N / 2) mean_omega tr(Phi^-1 dPhi_i Phi^-1 dPhi_j),
@@ -149,9 +163,9 @@ def spectral_fisher_information(model: NoiseModel, slopes: list, n_samples: int,
 
     def spectrum(m: NoiseModel) -> np.ndarray:
         H = diff * m.transfer(omega)
-        out = m.rudder_noise ** 2 * np.einsum("wi,wj->wij", H, H.conj())
-        out[:, 0, 0] += m.heading_noise ** 2 * np.abs(diff[:, 0]) ** 2
-        out[:, 1, 1] += m.yaw_rate_noise ** 2
+        out = m.rudder_noise**2 * np.einsum("wi,wj->wij", H, H.conj())
+        out[:, 0, 0] += m.heading_noise**2 * np.abs(diff[:, 0]) ** 2
+        out[:, 1, 1] += m.yaw_rate_noise**2
         return out
 
     inverse = np.linalg.inv(spectrum(model))

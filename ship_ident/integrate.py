@@ -16,6 +16,7 @@ Inputs are samples: the rudder is interpolated linearly between samples
 ``gain_scale`` (K -> K g) and time constants with ``time_scale``
 (T -> T s), quasi-steadily.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -60,12 +61,54 @@ def advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, coef, r_power, abs_power
         db = d0 + ((s + 0.5) / substeps) * (d1 - d0)
         dc = d0 + ((s + 1.0) / substeps) * (d1 - d0)
         k1p, k1r, k1z = _rhs(order, psi, r, z, da, K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
-        k2p, k2r, k2z = _rhs(order, psi + 0.5 * dt * k1p, r + 0.5 * dt * k1r, z + 0.5 * dt * k1z, db,
-                             K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
-        k3p, k3r, k3z = _rhs(order, psi + 0.5 * dt * k2p, r + 0.5 * dt * k2r, z + 0.5 * dt * k2z, db,
-                             K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
-        k4p, k4r, k4z = _rhs(order, psi + dt * k3p, r + dt * k3r, z + dt * k3z, dc,
-                             K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig)
+        k2p, k2r, k2z = _rhs(
+            order,
+            psi + 0.5 * dt * k1p,
+            r + 0.5 * dt * k1r,
+            z + 0.5 * dt * k1z,
+            db,
+            K,
+            T1,
+            T2,
+            T3,
+            coef,
+            r_power,
+            abs_power,
+            harmonic,
+            trig,
+        )
+        k3p, k3r, k3z = _rhs(
+            order,
+            psi + 0.5 * dt * k2p,
+            r + 0.5 * dt * k2r,
+            z + 0.5 * dt * k2z,
+            db,
+            K,
+            T1,
+            T2,
+            T3,
+            coef,
+            r_power,
+            abs_power,
+            harmonic,
+            trig,
+        )
+        k4p, k4r, k4z = _rhs(
+            order,
+            psi + dt * k3p,
+            r + dt * k3r,
+            z + dt * k3z,
+            dc,
+            K,
+            T1,
+            T2,
+            T3,
+            coef,
+            r_power,
+            abs_power,
+            harmonic,
+            trig,
+        )
         psi += dt * (k1p + 2 * k2p + 2 * k3p + k4p) / 6.0
         r += dt * (k1r + 2 * k2r + 2 * k3r + k4r) / 6.0
         z += dt * (k1z + 2 * k2z + 2 * k3z + k4z) / 6.0
@@ -83,44 +126,93 @@ def _forcing_lanes(out, work, psi, r, coef, r_power, abs_power, harmonic, trig):
     """``_forcing`` of every lane at once: ``coef[term, lane]``, states ``psi[lane]``, ``r[lane]``.
     Each loop runs over the lanes, so that it compiles to vector instructions."""
     lanes = out.shape[0]
-    for l in range(lanes):
-        out[l] = 0.0
+    for lane in range(lanes):
+        out[lane] = 0.0
     for j in range(coef.shape[0]):
-        for l in range(lanes):
-            work[l] = coef[j, l]
+        for lane in range(lanes):
+            work[lane] = coef[j, lane]
         for _ in range(r_power[j]):
-            for l in range(lanes):
-                work[l] *= r[l]
+            for lane in range(lanes):
+                work[lane] *= r[lane]
         for _ in range(abs_power[j]):
-            for l in range(lanes):
-                work[l] *= abs(r[l])
+            for lane in range(lanes):
+                work[lane] *= abs(r[lane])
         if trig[j] == 1:
-            for l in range(lanes):
-                work[l] *= np.cos(harmonic[j] * psi[l])
+            for lane in range(lanes):
+                work[lane] *= np.cos(harmonic[j] * psi[lane])
         elif trig[j] == 2:
-            for l in range(lanes):
-                work[l] *= np.sin(harmonic[j] * psi[l])
-        for l in range(lanes):
-            out[l] += work[l]
+            for lane in range(lanes):
+                work[lane] *= np.sin(harmonic[j] * psi[lane])
+        for lane in range(lanes):
+            out[lane] += work[lane]
 
 
 @njit(cache=True)
-def _advance_lane(order, h, rudder, gain_scale, time_scale, constants, first, last, psi, r, z,
-                  coef, r_power, abs_power, harmonic, trig, substeps, psi_out, r_out):
+def _advance_lane(
+    order,
+    h,
+    rudder,
+    gain_scale,
+    time_scale,
+    constants,
+    first,
+    last,
+    psi,
+    r,
+    z,
+    coef,
+    r_power,
+    abs_power,
+    harmonic,
+    trig,
+    substeps,
+    psi_out,
+    r_out,
+):
     """One lane of ``simulate_kernel`` on its own, with ``advance``: samples first..last+1."""
     for k in range(first, last + 1):
         s = time_scale[k]
-        psi, r, z = advance(order, h, rudder[k], rudder[k + 1], constants[0] * gain_scale[k],
-                            constants[1] * s, constants[2] * s, constants[3] * s, psi, r, z, coef, r_power,
-                            abs_power, harmonic, trig, substeps)
+        psi, r, z = advance(
+            order,
+            h,
+            rudder[k],
+            rudder[k + 1],
+            constants[0] * gain_scale[k],
+            constants[1] * s,
+            constants[2] * s,
+            constants[3] * s,
+            psi,
+            r,
+            z,
+            coef,
+            r_power,
+            abs_power,
+            harmonic,
+            trig,
+            substeps,
+        )
         if not (np.isfinite(psi) and np.isfinite(r)) or abs(r) > 1e3:
             return
         psi_out[k + 1], r_out[k + 1] = psi, r
 
 
 @njit(cache=True, error_model="numpy")
-def simulate_kernel(order, h, rudder, gain_scale, time_scale, constants, bounds, initial,
-                    coef, r_power, abs_power, harmonic, trig, substeps):
+def simulate_kernel(
+    order,
+    h,
+    rudder,
+    gain_scale,
+    time_scale,
+    constants,
+    bounds,
+    initial,
+    coef,
+    r_power,
+    abs_power,
+    harmonic,
+    trig,
+    substeps,
+):
     """Integrate ``m`` runs of the model over every segment ``bounds[i] = (start, stop)`` with RK4,
     ``substeps`` steps per sample; run ``j`` has its own inputs ``rudder[j]``, ``gain_scale[j]``,
     ``time_scale[j]`` (m x n), constants (K, T1, T2, T3) = ``constants[j]``, forcing
@@ -142,80 +234,110 @@ def simulate_kernel(order, h, rudder, gain_scale, time_scale, constants, bounds,
     r_out = np.full((runs, n), np.nan)
     run = np.empty(lanes, dtype=np.int64)
     first = np.empty(lanes, dtype=np.int64)
-    last = np.empty(lanes, dtype=np.int64)      # last sample a lane steps from
+    last = np.empty(lanes, dtype=np.int64)  # last sample a lane steps from
     alive = np.empty(lanes, dtype=np.bool_)
     psi, r, z = np.empty(lanes), np.empty(lanes), np.empty(lanes)
     lane_coef = np.empty((coef.shape[1], lanes))
     longest = 0
-    for l in range(lanes):
-        j, i = l // segments, l % segments
+    for lane in range(lanes):
+        j, i = lane // segments, lane % segments
         a, b = bounds[i, 0], bounds[i, 1]
-        run[l], first[l], last[l], alive[l] = j, a, max(b - 2, a), b - a >= 2
+        run[lane], first[lane], last[lane], alive[lane] = j, a, max(b - 2, a), b - a >= 2
         longest = max(longest, b - a)
-        lane_coef[:, l] = coef[j]
-        psi[l], r[l] = initial[j, i, 0], initial[j, i, 1]
+        lane_coef[:, lane] = coef[j]
+        psi[lane], r[lane] = initial[j, i, 0], initial[j, i, 1]
         s = time_scale[j, a]
-        z[l] = initial_z(constants[j, 0] * gain_scale[j, a], constants[j, 1] * s, constants[j, 2] * s,
-                         constants[j, 3] * s, r[l], initial[j, i, 2], rudder[j, a])
+        z[lane] = initial_z(
+            constants[j, 0] * gain_scale[j, a],
+            constants[j, 1] * s,
+            constants[j, 2] * s,
+            constants[j, 3] * s,
+            r[lane],
+            initial[j, i, 2],
+            rudder[j, a],
+        )
         if b > a:
-            psi_out[j, a], r_out[j, a] = psi[l], r[l]
-    if lanes == 1:   # a single chain: scalar registers beat vector loops of length one
+            psi_out[j, a], r_out[j, a] = psi[lane], r[lane]
+    if lanes == 1:  # a single chain: scalar registers beat vector loops of length one
         if alive[0]:
-            _advance_lane(order, h, rudder[0], gain_scale[0], time_scale[0], constants[0], first[0], last[0],
-                          psi[0], r[0], z[0], coef[0], r_power, abs_power, harmonic, trig, substeps,
-                          psi_out[0], r_out[0])
+            _advance_lane(
+                order,
+                h,
+                rudder[0],
+                gain_scale[0],
+                time_scale[0],
+                constants[0],
+                first[0],
+                last[0],
+                psi[0],
+                r[0],
+                z[0],
+                coef[0],
+                r_power,
+                abs_power,
+                harmonic,
+                trig,
+                substeps,
+                psi_out[0],
+                r_out[0],
+            )
         return psi_out, r_out
     # per-sample constants of each lane: K, T1 + T2, 1 / (T1 T2), K T3, 1 / T
-    K, S, inv_P, KT3, inv_T = (np.empty(lanes), np.empty(lanes), np.empty(lanes),
-                              np.empty(lanes), np.empty(lanes))
+    K, S, inv_P, KT3, inv_T = (np.empty(lanes), np.empty(lanes), np.empty(lanes), np.empty(lanes), np.empty(lanes))
     d0, slope, d = np.empty(lanes), np.empty(lanes), np.empty(lanes)
-    stage = np.empty((4, 3, lanes))             # RK4 slopes k1..k4 of (psi, r, z)
+    stage = np.empty((4, 3, lanes))  # RK4 slopes k1..k4 of (psi, r, z)
     tp, tr, tz = np.empty(lanes), np.empty(lanes), np.empty(lanes)
     force, work = np.empty(lanes), np.empty(lanes)
     dt = h / substeps
     for step in range(longest - 1):
-        for l in range(lanes):
-            j, k = run[l], min(first[l] + step, last[l])
+        for lane in range(lanes):
+            j, k = run[lane], min(first[lane] + step, last[lane])
             s = time_scale[j, k]
-            K[l] = constants[j, 0] * gain_scale[j, k]
-            S[l] = (constants[j, 1] + constants[j, 2]) * s
-            inv_P[l] = 1.0 / (constants[j, 1] * constants[j, 2] * s * s)  # inf for nomoto1: unused
-            KT3[l] = K[l] * constants[j, 3] * s
-            inv_T[l] = 1.0 / (constants[j, 1] * s)
-            d0[l] = rudder[j, k]
-            slope[l] = rudder[j, min(k + 1, n - 1)] - d0[l]
+            K[lane] = constants[j, 0] * gain_scale[j, k]
+            S[lane] = (constants[j, 1] + constants[j, 2]) * s
+            inv_P[lane] = 1.0 / (constants[j, 1] * constants[j, 2] * s * s)  # inf for nomoto1: unused
+            KT3[lane] = K[lane] * constants[j, 3] * s
+            inv_T[lane] = 1.0 / (constants[j, 1] * s)
+            d0[lane] = rudder[j, k]
+            slope[lane] = rudder[j, min(k + 1, n - 1)] - d0[lane]
         for sub in range(substeps):
-            for q in range(4):   # stage q from the state advanced by the previous stage's slope
+            for q in range(4):  # stage q from the state advanced by the previous stage's slope
                 fraction = (sub + RK4_NODES[q]) / substeps
                 weight = RK4_NODES[q] * dt
-                for l in range(lanes):
-                    d[l] = d0[l] + fraction * slope[l]
+                for lane in range(lanes):
+                    d[lane] = d0[lane] + fraction * slope[lane]
                     if q == 0:
-                        tp[l], tr[l], tz[l] = psi[l], r[l], z[l]
+                        tp[lane], tr[lane], tz[lane] = psi[lane], r[lane], z[lane]
                     else:
-                        tp[l] = psi[l] + weight * stage[q - 1, 0, l]
-                        tr[l] = r[l] + weight * stage[q - 1, 1, l]
-                        tz[l] = z[l] + weight * stage[q - 1, 2, l]
+                        tp[lane] = psi[lane] + weight * stage[q - 1, 0, lane]
+                        tr[lane] = r[lane] + weight * stage[q - 1, 1, lane]
+                        tz[lane] = z[lane] + weight * stage[q - 1, 2, lane]
                 _forcing_lanes(force, work, tp, tr, lane_coef, r_power, abs_power, harmonic, trig)
-                for l in range(lanes):
-                    stage[q, 0, l] = tr[l]
+                for lane in range(lanes):
+                    stage[q, 0, lane] = tr[lane]
                     if order == 1:
-                        stage[q, 1, l] = (K[l] * d[l] + force[l] - tr[l]) * inv_T[l]
-                        stage[q, 2, l] = 0.0
+                        stage[q, 1, lane] = (K[lane] * d[lane] + force[lane] - tr[lane]) * inv_T[lane]
+                        stage[q, 2, lane] = 0.0
                     else:
-                        stage[q, 1, l] = (tz[l] - S[l] * tr[l] + KT3[l] * d[l]) * inv_P[l]
-                        stage[q, 2, l] = K[l] * d[l] + force[l] - tr[l]
-            for l in range(lanes):
-                psi[l] += dt * (stage[0, 0, l] + 2 * stage[1, 0, l] + 2 * stage[2, 0, l] + stage[3, 0, l]) / 6
-                r[l] += dt * (stage[0, 1, l] + 2 * stage[1, 1, l] + 2 * stage[2, 1, l] + stage[3, 1, l]) / 6
-                z[l] += dt * (stage[0, 2, l] + 2 * stage[1, 2, l] + 2 * stage[2, 2, l] + stage[3, 2, l]) / 6
-        for l in range(lanes):
-            k = first[l] + step
-            if alive[l] and k <= last[l]:
-                if np.isfinite(psi[l]) and np.isfinite(r[l]) and abs(r[l]) <= 1e3:
-                    psi_out[run[l], k + 1], r_out[run[l], k + 1] = psi[l], r[l]
+                        stage[q, 1, lane] = (tz[lane] - S[lane] * tr[lane] + KT3[lane] * d[lane]) * inv_P[lane]
+                        stage[q, 2, lane] = K[lane] * d[lane] + force[lane] - tr[lane]
+            for lane in range(lanes):
+                psi[lane] += (
+                    dt * (stage[0, 0, lane] + 2 * stage[1, 0, lane] + 2 * stage[2, 0, lane] + stage[3, 0, lane]) / 6
+                )
+                r[lane] += (
+                    dt * (stage[0, 1, lane] + 2 * stage[1, 1, lane] + 2 * stage[2, 1, lane] + stage[3, 1, lane]) / 6
+                )
+                z[lane] += (
+                    dt * (stage[0, 2, lane] + 2 * stage[1, 2, lane] + 2 * stage[2, 2, lane] + stage[3, 2, lane]) / 6
+                )
+        for lane in range(lanes):
+            k = first[lane] + step
+            if alive[lane] and k <= last[lane]:
+                if np.isfinite(psi[lane]) and np.isfinite(r[lane]) and abs(r[lane]) <= 1e3:
+                    psi_out[run[lane], k + 1], r_out[run[lane], k + 1] = psi[lane], r[lane]
                 else:
-                    alive[l] = False
+                    alive[lane] = False
     return psi_out, r_out
 
 

@@ -20,6 +20,7 @@ ROS's body frame (x forward, y to port): surge u = linear.x, sway v = -linear.y
 Every unusable input raises ``DataError`` with one sentence saying what is
 wrong and what to do.
 """
+
 from __future__ import annotations
 
 import csv
@@ -58,8 +59,17 @@ VELOCITY_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistStamped")
 TWIST_STAMPED = VELOCITY_TYPES[1]
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 DEFAULT_TOPICS = Topics()  # the node's default topic names
-BAD_BAG_ERRORS = (AnyReaderError, ReaderError, struct.error, EOFError, OSError, ValueError,
-                  KeyError, IndexError, AssertionError)
+BAD_BAG_ERRORS = (
+    AnyReaderError,
+    ReaderError,
+    struct.error,
+    EOFError,
+    OSError,
+    ValueError,
+    KeyError,
+    IndexError,
+    AssertionError,
+)
 
 
 class UnreadableBag(DataError):
@@ -73,6 +83,7 @@ def typestore():
 
 
 # --- reading -----------------------------------------------------------------
+
 
 def read_samples(path, topics: Topics = DEFAULT_TOPICS, csv_roles: dict = CSV_SYNONYMS) -> list[Sample]:
     """All input samples of a bag or CSV file, time-ordered (see module docstring); a CSV file's
@@ -89,8 +100,9 @@ def read_samples(path, topics: Topics = DEFAULT_TOPICS, csv_roles: dict = CSV_SY
     elif path.suffix.lower() in (".csv", ".txt"):
         samples = _read_csv(path, dict(topics.csv_columns), csv_roles)
     else:
-        raise DataError(f"{path} is neither a bag (rosbag2 directory or .mcap file) nor a CSV file "
-                        "(.csv); convert it or rename it")
+        raise DataError(
+            f"{path} is neither a bag (rosbag2 directory or .mcap file) nor a CSV file (.csv); convert it or rename it"
+        )
     _check_not_all_nan(path, samples)
     samples.sort(key=lambda s: s.time)
     return samples
@@ -126,8 +138,10 @@ def _read_bag_dir(path: Path, topics: Topics) -> list[Sample]:
             if not mcaps:
                 raise
     if not mcaps:
-        raise DataError(f"{path} is a directory without metadata.yaml or .mcap files; "
-                        "give a rosbag2 directory recorded with MCAP storage")
+        raise DataError(
+            f"{path} is a directory without metadata.yaml or .mcap files; "
+            "give a rosbag2 directory recorded with MCAP storage"
+        )
     return _read_bag(mcaps, topics)
 
 
@@ -139,8 +153,10 @@ def _read_bag(paths: list[Path], topics: Topics) -> list[Sample]:
     except DataError:
         raise
     except BAD_BAG_ERRORS as err:
-        raise UnreadableBag(f"{name} is not a readable MCAP bag ({err}); it is corrupt or truncated "
-                        "(an interrupted recording): re-record or re-export it") from None
+        raise UnreadableBag(
+            f"{name} is not a readable MCAP bag ({err}); it is corrupt or truncated "
+            "(an interrupted recording): re-record or re-export it"
+        ) from None
 
 
 def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
@@ -157,13 +173,16 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
     missing = [t for role, t in wanted.items() if role != "speed" and t not in found]
     if missing:
         have = ", ".join(f"{t} ({m})" for t, m in sorted(found.items())) or "none"
-        raise DataError(f"{name} has no topic {', '.join(missing)}; topics in it: {have}; "
-                        "choose the topics with the --*-topic options")
+        raise DataError(
+            f"{name} has no topic {', '.join(missing)}; topics in it: {have}; "
+            "choose the topics with the --*-topic options"
+        )
     for role, topic in wanted.items():
         expected = {"imu": (IMU,), "velocity": VELOCITY_TYPES}.get(role, (FLOAT64,))
         if topic in found and found[topic] not in expected:
-            raise DataError(f"{name}: topic {topic} carries {found[topic]}, expected {' or '.join(expected)}; "
-                            "choose another topic")
+            raise DataError(
+                f"{name}: topic {topic} carries {found[topic]}, expected {' or '.join(expected)}; choose another topic"
+            )
     role_of = {t: role for role, t in wanted.items() if t in found}
     samples = []
     connections = [c for c in reader.connections if c.topic in role_of]
@@ -180,8 +199,10 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
         count += 1
     indexed = sum(c.msgcount for c in connections)
     if count < indexed:
-        raise UnreadableBag(f"{name} is corrupt or truncated: only {count} of its {indexed} indexed "
-                            "messages are readable; re-record or re-export it")
+        raise UnreadableBag(
+            f"{name} is corrupt or truncated: only {count} of its {indexed} indexed "
+            "messages are readable; re-record or re-export it"
+        )
     return samples
 
 
@@ -196,8 +217,10 @@ def imu_samples(msg, log_time: float) -> tuple[Sample, Sample]:
     time = header_time(msg, log_time)
     q = msg.orientation
     yaw_enu = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-    return (Sample(time, "heading", wrap_angle(math.pi / 2 - yaw_enu)),
-            Sample(time, "yaw_rate", -float(msg.angular_velocity.z)))
+    return (
+        Sample(time, "heading", wrap_angle(math.pi / 2 - yaw_enu)),
+        Sample(time, "yaw_rate", -float(msg.angular_velocity.z)),
+    )
 
 
 def velocity_samples(msg, log_time: float) -> tuple[Sample, Sample]:
@@ -221,19 +244,22 @@ def parse_columns(text: str) -> tuple[tuple[str, str], ...]:
     for item in filter(None, (part.strip() for part in text.split(","))):
         role, sep, column = (x.strip() for x in item.partition("="))
         if not sep or not role or not column:
-            raise DataError(f"--columns item {item!r} is not ROLE=COLUMN; "
-                            "e.g. --columns speed=surge_speed,rudder=delta")
+            raise DataError(
+                f"--columns item {item!r} is not ROLE=COLUMN; e.g. --columns speed=surge_speed,rudder=delta"
+            )
         if role not in CSV_SYNONYMS and role not in VELOCITY_SYNONYMS:
-            raise DataError(f"--columns: unknown role {role!r}; roles are "
-                            f"{', '.join([*CSV_SYNONYMS, *VELOCITY_SYNONYMS])}")
+            raise DataError(
+                f"--columns: unknown role {role!r}; roles are {', '.join([*CSV_SYNONYMS, *VELOCITY_SYNONYMS])}"
+            )
         if role in dict(pairs):
             raise DataError(f"--columns names the role {role!r} twice; give each role once")
         pairs.append((role, column))
     return tuple(pairs)
 
 
-def resolve_columns(header: list[str], chosen: dict[str, str], synonyms: dict[str, tuple[str, ...]],
-                    required, source) -> dict[str, str]:
+def resolve_columns(
+    header: list[str], chosen: dict[str, str], synonyms: dict[str, tuple[str, ...]], required, source
+) -> dict[str, str]:
     """Which header column each role of ``synonyms`` is read from: the user's ``chosen`` column
     (which must exist), else the first synonym present (case-insensitive). A ``required`` role
     without a column, or one column for two roles, raises DataError naming the columns found."""
@@ -242,8 +268,9 @@ def resolve_columns(header: list[str], chosen: dict[str, str], synonyms: dict[st
     mapping = {}
     for role, column in chosen.items():
         if role not in synonyms:
-            raise DataError(f"--columns {role}={column}: this model reads no {role}; its roles are "
-                            f"{', '.join(synonyms)}")
+            raise DataError(
+                f"--columns {role}={column}: this model reads no {role}; its roles are {', '.join(synonyms)}"
+            )
         if column not in header:
             raise DataError(f"{source} has no column {column!r} (--columns {role}={column}); its columns: {found}")
         mapping[role] = column
@@ -257,11 +284,15 @@ def resolve_columns(header: list[str], chosen: dict[str, str], synonyms: dict[st
         taken = next((by_name[n] for n in synonyms[role] if by_name.get(n) in mapping.values()), None)
         if taken is not None:
             other = next(r for r, c in mapping.items() if c == taken)
-            raise DataError(f"{source}: column {taken!r} is read as {other} (--columns), so {role} has "
-                            f"none; name its column with --columns {role}=NAME")
+            raise DataError(
+                f"{source}: column {taken!r} is read as {other} (--columns), so {role} has "
+                f"none; name its column with --columns {role}=NAME"
+            )
     if missing:
-        raise DataError(f"{source} has no column for {', '.join(missing)}; its columns: {found}; "
-                        f"name them with --columns, e.g. --columns {missing[0]}=NAME (SI units)")
+        raise DataError(
+            f"{source} has no column for {', '.join(missing)}; its columns: {found}; "
+            f"name them with --columns, e.g. --columns {missing[0]}=NAME (SI units)"
+        )
     twice = sorted({c for c in mapping.values() if list(mapping.values()).count(c) > 1})
     if twice:
         raise DataError(f"{source}: column {twice[0]!r} is named for two roles; give each role its own column")
@@ -273,8 +304,9 @@ def _csv_header(path: Path) -> list[str]:
         return [h.strip() for h in next(csv.reader(f), [])]
 
 
-def csv_column_map(path, chosen: dict[str, str] | None = None, synonyms=CSV_SYNONYMS,
-                   required=CSV_COLUMNS[:4]) -> dict[str, str]:
+def csv_column_map(
+    path, chosen: dict[str, str] | None = None, synonyms=CSV_SYNONYMS, required=CSV_COLUMNS[:4]
+) -> dict[str, str]:
     """Role -> CSV column read for the roles of ``synonyms`` (default: the Nomoto model's) of
     ``path`` (see ``resolve_columns``)."""
     path = Path(path)
@@ -302,8 +334,9 @@ def read_csv_columns(path: Path, mapping: dict[str, str]) -> dict[str, np.ndarra
             try:
                 rows.append([float(row[i]) for i in index.values()])
             except (ValueError, IndexError):
-                raise DataError(f"{path} line {line} is not {len(header)} numbers: {','.join(row)!r}; "
-                                "fix or delete that line") from None
+                raise DataError(
+                    f"{path} line {line} is not {len(header)} numbers: {','.join(row)!r}; fix or delete that line"
+                ) from None
     if not rows:
         raise DataError(f"{path} holds a header but no data rows; export the data again")
     return dict(zip(index, np.array(rows).T))
@@ -312,8 +345,12 @@ def read_csv_columns(path: Path, mapping: dict[str, str]) -> dict[str, np.ndarra
 def _read_csv(path: Path, chosen: dict[str, str], roles: dict) -> list[Sample]:
     mapping = csv_column_map(path, chosen, roles, [r for r in roles if r != "speed"])
     columns = read_csv_columns(path, mapping)
-    return [Sample(float(t), role, float(columns[role][i]))
-            for i, t in enumerate(columns["t"]) for role in columns if role != "t"]
+    return [
+        Sample(float(t), role, float(columns[role][i]))
+        for i, t in enumerate(columns["t"])
+        for role in columns
+        if role != "t"
+    ]
 
 
 def _check_not_all_nan(path: Path, samples: list[Sample]) -> None:
@@ -324,6 +361,7 @@ def _check_not_all_nan(path: Path, samples: list[Sample]) -> None:
 
 
 # --- writing -----------------------------------------------------------------
+
 
 class BagWriter:
     """Write ROS 2 messages to a rosbag2 directory (``fmt='rosbag2'``) or a bare ``.mcap`` file.
@@ -344,8 +382,11 @@ class BagWriter:
             raise DataError(f"{self.path} exists already; remove it or choose another output path")
         self.fmt = fmt
         # A bare .mcap is the storage file of a rosbag2 directory written beside it.
-        self._bag_dir = self.path if fmt == "rosbag2" else Path(
-            tempfile.mkdtemp(prefix=f".{self.path.name}.", dir=self.path.parent)) / "bag"
+        self._bag_dir = (
+            self.path
+            if fmt == "rosbag2"
+            else Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", dir=self.path.parent)) / "bag"
+        )
         self._writer = Writer(self._bag_dir, version=9, storage_plugin=StoragePlugin.MCAP)
         self._writer.open()
         self._connections: dict[str, object] = {}
@@ -378,8 +419,7 @@ class BagWriter:
 def write_simulation(sim, path, fmt: str = "rosbag2") -> None:
     """Write a Simulation's measurements as the DESIGN.md Float64 topics (or CSV), heading wrapped."""
     d = sim.dataset
-    columns = {"rudder": d.rudder, "heading": d.meta["wrapped_heading"], "yaw_rate": d.yaw_rate,
-               "speed": d.speed}
+    columns = {"rudder": d.rudder, "heading": d.meta["wrapped_heading"], "yaw_rate": d.yaw_rate, "speed": d.speed}
     columns = {role: values for role, values in columns.items() if values is not None}
     if fmt == "csv":
         path = Path(path)

@@ -1,4 +1,5 @@
 """Strict JSON for records that leave the process (CLI, topics, logs): NaN and Inf become null."""
+
 from __future__ import annotations
 
 import json

@@ -4,6 +4,7 @@ All figures here compare a *free-run simulation* (the model driven only by
 the measured rudder from a measured initial state) with measurements; they
 are never one-step predictions.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,15 +14,21 @@ def signal_metrics(measured: np.ndarray, model: np.ndarray) -> dict:
     """RMSE, correlation R, centred RMS difference E' and STD ratio, NRMSE fit % (NaN-safe)."""
     ok = np.isfinite(measured) & np.isfinite(model)
     if ok.sum() < 2:
-        return {"rmse": float("inf"), "r": 0.0, "e_centred": float("inf"), "std_ratio": 0.0,
-                "fit_percent": -float("inf"), "diverged": True}
+        return {
+            "rmse": float("inf"),
+            "r": 0.0,
+            "e_centred": float("inf"),
+            "std_ratio": 0.0,
+            "fit_percent": -float("inf"),
+            "diverged": True,
+        }
     m, s = measured[ok], model[ok]
     err = s - m
     dm, ds = m - m.mean(), s - s.mean()
     sd_m, sd_s = dm.std(), ds.std()
     r = float(dm @ ds / (len(m) * sd_m * sd_s)) if sd_m > 0 and sd_s > 0 else 0.0
     return {
-        "rmse": float(np.sqrt(np.mean(err ** 2))),
+        "rmse": float(np.sqrt(np.mean(err**2))),
         "r": r,
         "e_centred": float(np.sqrt(np.mean((ds - dm) ** 2)) / sd_m) if sd_m > 0 else float("inf"),
         "std_ratio": float(sd_s / sd_m) if sd_m > 0 else 0.0,
@@ -30,18 +37,22 @@ def signal_metrics(measured: np.ndarray, model: np.ndarray) -> dict:
     }
 
 
-def free_run_fit(heading: np.ndarray, yaw_rate: np.ndarray, sim_heading: np.ndarray,
-                 sim_yaw_rate: np.ndarray) -> dict:
+def free_run_fit(heading: np.ndarray, yaw_rate: np.ndarray, sim_heading: np.ndarray, sim_yaw_rate: np.ndarray) -> dict:
     """The ``fit`` record of the JSON contract, from free-run heading and yaw rate (SI)."""
     h = signal_metrics(heading, sim_heading)
     r = signal_metrics(yaw_rate, sim_yaw_rate)
     return {
         "horizon": "free-run",
-        "rmse_heading": h["rmse"], "rmse_yaw_rate": r["rmse"],
-        "r_heading": h["r"], "r_yaw_rate": r["r"],
-        "e_centred_heading": h["e_centred"], "e_centred_yaw_rate": r["e_centred"],
-        "std_ratio_heading": h["std_ratio"], "std_ratio_yaw_rate": r["std_ratio"],
-        "fit_percent_heading": h["fit_percent"], "fit_percent_yaw_rate": r["fit_percent"],
+        "rmse_heading": h["rmse"],
+        "rmse_yaw_rate": r["rmse"],
+        "r_heading": h["r"],
+        "r_yaw_rate": r["r"],
+        "e_centred_heading": h["e_centred"],
+        "e_centred_yaw_rate": r["e_centred"],
+        "std_ratio_heading": h["std_ratio"],
+        "std_ratio_yaw_rate": r["std_ratio"],
+        "fit_percent_heading": h["fit_percent"],
+        "fit_percent_yaw_rate": r["fit_percent"],
         "diverged": h["diverged"] or r["diverged"],
     }
 

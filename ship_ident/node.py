@@ -16,6 +16,7 @@ JSON-lines files there, so the history survives a restart.
 Run: ``identifier_node --ros-args --params-file config/ship_ident.yaml``
 (or ``python -m ship_ident.node``). SIGINT and SIGTERM stop it cleanly.
 """
+
 from __future__ import annotations
 
 import os
@@ -32,8 +33,7 @@ from dataclasses import fields
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType, SetParametersResult)
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -41,14 +41,13 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
-from .jsonio import dumps_json
 from .estimators import method_names
 from .io import FLOAT64, IMU, Sample, imu_samples
-from .online import (CONDITION_LEVELS, MAX_WINDOW_SAMPLES, ConfigError, EstimateLog, OnlineConfig,
-                     OnlineIdentifier)
+from .jsonio import dumps_json
+from .online import CONDITION_LEVELS, MAX_WINDOW_SAMPLES, ConfigError, EstimateLog, OnlineConfig, OnlineIdentifier
 
 NODE_NAME = "ship_ident"
-TICKS_PER_REFIT = 5   # the schedule is checked this many times per refit period
+TICKS_PER_REFIT = 5  # the schedule is checked this many times per refit period
 
 # name -> (description, (low, high) or None, read_only)
 PARAMETER_DOCS = {
@@ -56,43 +55,65 @@ PARAMETER_DOCS = {
     "heading_topic": ("std_msgs/Float64 heading topic, rad, NED (clockwise), may be wrapped", None, True),
     "yaw_rate_topic": ("std_msgs/Float64 yaw rate topic, rad/s, NED (clockwise)", None, True),
     "speed_topic": ("std_msgs/Float64 forward speed topic, m/s; empty: no speed input", None, True),
-    "imu_topic": ("sensor_msgs/Imu topic (ENU) used for heading and yaw rate instead of "
-                  "heading_topic and yaw_rate_topic; empty: not used", None, True),
+    "imu_topic": (
+        "sensor_msgs/Imu topic (ENU) used for heading and yaw rate instead of "
+        "heading_topic and yaw_rate_topic; empty: not used",
+        None,
+        True,
+    ),
     "sample_time": ("s, grid step the window is resampled to", (0.01, 1.0), False),
     "window_length": ("s of data in each fit", (10.0, 3600.0), False),
     "refit_period": ("s between refits", (0.1, 3600.0), False),
     "model": ("base model: nomoto1 (K, T) or nomoto2 (K, T1, T2, T3)", None, False),
-    "effects": ("effects added to the model: rudder_offset, cubic_yaw, rudder_delay, wind_yaw, "
-                "gyro_bias, speed_dependence", None, False),
+    "effects": (
+        "effects added to the model: rudder_offset, cubic_yaw, rudder_delay, wind_yaw, gyro_bias, speed_dependence",
+        None,
+        False,
+    ),
     "method": (f"estimator: {', '.join(method_names())}", None, False),
     "min_window_length": ("s of data needed before the first fit", (1.0, 3600.0), False),
     "min_rudder_std": ("rad; a window with less rudder activity gives no new estimate", (0.0, 0.5), False),
-    "min_fit_correlation": ("free-run yaw-rate correlation below which the fit is reported poor",
-                            (0.0, 1.0), False),
+    "min_fit_correlation": ("free-run yaw-rate correlation below which the fit is reported poor", (0.0, 1.0), False),
     "stale_timeout": ("s without a sample before an input is reported stale", (0.01, 3600.0), False),
-    "gap_threshold": ("s without a sample that splits the window into segments (>= sample_time); "
-                      "0: five sample times", (0.0, 3600.0), False),
-    "rudder_limit": ("rad, the steering gear's limit: a rudder held there for half the window is "
-                     "reported rudder_saturated", (0.01, 1.5708), False),
+    "gap_threshold": (
+        "s without a sample that splits the window into segments (>= sample_time); 0: five sample times",
+        (0.0, 3600.0),
+        False,
+    ),
+    "rudder_limit": (
+        "rad, the steering gear's limit: a rudder held there for half the window is reported rudder_saturated",
+        (0.01, 1.5708),
+        False,
+    ),
     "clock_jump_threshold": ("s; a clock step back this large resets the window", (0.01, 3600.0), False),
-    "max_window_samples": ("hard bound on stored samples per input (about 110 bytes each)",
-                           (100, MAX_WINDOW_SAMPLES), False),
-    "prediction_horizon": ("s of free run from the measured state behind ~/predicted_yaw_rate",
-                           (0.1, 3600.0), False),
-    "change_ratio": ("ratio (mean squares) of the last model's free-run yaw-rate error over the newest "
-                     "change_test_length s to its usual level beyond which, on two refits in a row (or 4x it "
-                     "once over the newest refit period), the vessel counts as changed and the window "
-                     "restarts; 0: never", (0.0, 1e6), False),
+    "max_window_samples": (
+        "hard bound on stored samples per input (about 110 bytes each)",
+        (100, MAX_WINDOW_SAMPLES),
+        False,
+    ),
+    "prediction_horizon": ("s of free run from the measured state behind ~/predicted_yaw_rate", (0.1, 3600.0), False),
+    "change_ratio": (
+        "ratio (mean squares) of the last model's free-run yaw-rate error over the newest "
+        "change_test_length s to its usual level beyond which, on two refits in a row (or 4x it "
+        "once over the newest refit period), the vessel counts as changed and the window "
+        "restarts; 0: never",
+        (0.0, 1e6),
+        False,
+    ),
     "change_test_length": ("s of newest data the change test runs the last model over", (1.0, 3600.0), False),
     "qos_reliability": ("input QoS reliability: best_effort (sensor data) or reliable", None, True),
     "qos_depth": ("input QoS history depth (messages kept per topic)", (1, 10000), True),
-    "log_directory": ("directory of the JSON-lines estimate log (estimates.jsonl, rotated); "
-                      "empty: no log", None, True),
+    "log_directory": ("directory of the JSON-lines estimate log (estimates.jsonl, rotated); empty: no log", None, True),
     "log_max_bytes": ("size in bytes at which the estimate log is rotated", (1000, 10**9), True),
     "log_backups": ("rotated estimate log files kept (estimates.jsonl.1 ...)", (0, 1000), True),
 }
-NODE_DEFAULTS = {"qos_reliability": "best_effort", "qos_depth": 100,
-                 "log_directory": "", "log_max_bytes": 10_000_000, "log_backups": 5}
+NODE_DEFAULTS = {
+    "qos_reliability": "best_effort",
+    "qos_depth": 100,
+    "log_directory": "",
+    "log_max_bytes": 10_000_000,
+    "log_backups": 5,
+}
 RELIABILITY = {"best_effort": ReliabilityPolicy.BEST_EFFORT, "reliable": ReliabilityPolicy.RELIABLE}
 CONFIG_NAMES = [f.name for f in fields(OnlineConfig)]
 DIAGNOSTIC_LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
@@ -104,8 +125,7 @@ def _descriptor(name: str, value) -> ParameterDescriptor:
     if isinstance(value, (list, tuple)):
         descriptor.type = ParameterType.PARAMETER_STRING_ARRAY
     if limits and isinstance(value, float):
-        descriptor.floating_point_range = [FloatingPointRange(from_value=float(limits[0]),
-                                                              to_value=float(limits[1]))]
+        descriptor.floating_point_range = [FloatingPointRange(from_value=float(limits[0]), to_value=float(limits[1]))]
     elif limits and isinstance(value, int):
         descriptor.integer_range = [IntegerRange(from_value=limits[0], to_value=limits[1], step=1)]
     return descriptor
@@ -123,22 +143,28 @@ class IdentifierNode(Node):
         reliability = self.get_parameter("qos_reliability").value
         if reliability not in RELIABILITY:
             raise ConfigError(f"qos_reliability must be best_effort or reliable, got {reliability!r}")
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.get_parameter("qos_depth").value,
-                         reliability=RELIABILITY[reliability])
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST,
+            depth=self.get_parameter("qos_depth").value,
+            reliability=RELIABILITY[reliability],
+        )
         self._expected_types = self._subscribe(self.identifier.config, qos)
         directory = self.get_parameter("log_directory").value
-        self.estimate_log = EstimateLog(directory, self.get_parameter("log_max_bytes").value,
-                                        self.get_parameter("log_backups").value) if directory else None
+        self.estimate_log = (
+            EstimateLog(directory, self.get_parameter("log_max_bytes").value, self.get_parameter("log_backups").value)
+            if directory
+            else None
+        )
         self.parameters_pub = self.create_publisher(Float64MultiArray, "~/parameters", 10)
         self.estimate_pub = self.create_publisher(String, "~/estimate", 10)
         self.predicted_pub = self.create_publisher(Float64, "~/predicted_yaw_rate", 10)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="refit")
-        self._running = None            # Future of the refit in progress
-        self._overruns = 0              # refits skipped since the last published record
+        self._running = None  # Future of the refit in progress
+        self._overruns = 0  # refits skipped since the last published record
         self._overrun_lock = threading.Lock()
         self._callback_errors = 0
-        self._type_problems = ""        # sentence about wrong-type publishers on the inputs, if any
+        self._type_problems = ""  # sentence about wrong-type publishers on the inputs, if any
         self._timer = None
         self._start_timer(self.identifier.config.refit_period)
         self.add_on_set_parameters_callback(self._check_parameters)
@@ -146,7 +172,8 @@ class IdentifierNode(Node):
         config = self.identifier.config
         self.get_logger().info(
             f"identifying {config.structure().label()} with {config.method}: window "
-            f"{config.window_length:g} s, refit every {config.refit_period:g} s")
+            f"{config.window_length:g} s, refit every {config.refit_period:g} s"
+        )
 
     # --- configuration ---------------------------------------------------
     def _config_from_parameters(self, overrides: dict | None = None) -> OnlineConfig:
@@ -173,9 +200,11 @@ class IdentifierNode(Node):
         config = self.identifier.config
         if config.refit_period != old_period:
             self._start_timer(config.refit_period)
-        self.get_logger().info(f"from the next refit: {config.structure().label()} with "
-                               f"{config.method}, window {config.window_length:g} s, "
-                               f"refit every {config.refit_period:g} s")
+        self.get_logger().info(
+            f"from the next refit: {config.structure().label()} with "
+            f"{config.method}, window {config.window_length:g} s, "
+            f"refit every {config.refit_period:g} s"
+        )
 
     def _start_timer(self, refit_period: float) -> None:
         if self._timer is not None:
@@ -195,20 +224,22 @@ class IdentifierNode(Node):
         for role, topic in roles.items():
             if topic:
                 subscription = self.create_subscription(
-                    Float64, topic, lambda msg, role=role: self._on_value(role, msg.data), qos)
+                    Float64, topic, lambda msg, role=role: self._on_value(role, msg.data), qos
+                )
                 expected[subscription.topic_name] = FLOAT64
         return expected
 
     def _check_topic_types(self) -> str:
         """A sentence naming input topics that also carry another message type ('' when none)."""
         graph = dict(self.get_topic_names_and_types())
-        wrong = [f"{topic} carries {', '.join(t for t in graph[topic] if t != expected)} "
-                 f"(expected {expected})" for topic, expected in self._expected_types.items()
-                 if any(t != expected for t in graph.get(topic, ()))]
+        wrong = [
+            f"{topic} carries {', '.join(t for t in graph[topic] if t != expected)} (expected {expected})"
+            for topic, expected in self._expected_types.items()
+            if any(t != expected for t in graph.get(topic, ()))
+        ]
         if not wrong:
             return ""
-        return ("; ".join(wrong) + ": those messages are never received; fix the publisher "
-                "or remap the topic")
+        return "; ".join(wrong) + ": those messages are never received; fix the publisher or remap the topic"
 
     def _now(self) -> float:
         """Node clock time in s (simulated time when use_sim_time is set)."""
@@ -229,8 +260,7 @@ class IdentifierNode(Node):
 
     def _report_callback_error(self, exc: Exception) -> None:
         self._callback_errors += 1
-        self.get_logger().warning(f"input dropped: {type(exc).__name__}: {exc}",
-                                  throttle_duration_sec=5.0)
+        self.get_logger().warning(f"input dropped: {type(exc).__name__}: {exc}", throttle_duration_sec=5.0)
 
     # --- refits ----------------------------------------------------------
     def _on_tick(self) -> None:
@@ -257,7 +287,8 @@ class IdentifierNode(Node):
             if overruns:
                 record.conditions["refit_overran"] = (
                     f"{overruns} refit(s) skipped: the previous refit was still running; "
-                    "raise refit_period or choose a faster method")
+                    "raise refit_period or choose a faster method"
+                )
             if self._type_problems:
                 record.conditions["wrong_message_type"] = self._type_problems
             if record.new_estimate and self.estimate_log is not None:
@@ -266,7 +297,8 @@ class IdentifierNode(Node):
                 except OSError as exc:
                     record.conditions["estimate_log_failed"] = (
                         f"cannot append to {self.estimate_log.path}: {exc.strerror or exc}; "
-                        "estimates are published but not logged")
+                        "estimates are published but not logged"
+                    )
             self._publish(record)
         except Exception as exc:
             self.get_logger().error(f"refit failed: {type(exc).__name__}: {exc}")
@@ -294,13 +326,16 @@ class IdentifierNode(Node):
         self._publish_diagnostics(record.time, record.level, record.conditions, values)
 
     def _publish_diagnostics(self, now: float, level: int, conditions: dict, values: dict) -> None:
-        status = DiagnosticStatus(level=DIAGNOSTIC_LEVELS[level], name=f"{NODE_NAME}: identification",
-                                  hardware_id=self.get_fully_qualified_name())
+        status = DiagnosticStatus(
+            level=DIAGNOSTIC_LEVELS[level],
+            name=f"{NODE_NAME}: identification",
+            hardware_id=self.get_fully_qualified_name(),
+        )
         ordered = sorted(conditions, key=lambda c: -CONDITION_LEVELS.get(c, 2))
-        status.message = "; ".join(f"{c.replace('_', ' ')}: {conditions[c]}" for c in ordered) \
-            or "estimating"
-        status.values = [KeyValue(key=f"condition/{c}", value=conditions[c]) for c in ordered] + \
-            [KeyValue(key=k, value=v) for k, v in values.items()]
+        status.message = "; ".join(f"{c.replace('_', ' ')}: {conditions[c]}" for c in ordered) or "estimating"
+        status.values = [KeyValue(key=f"condition/{c}", value=conditions[c]) for c in ordered] + [
+            KeyValue(key=k, value=v) for k, v in values.items()
+        ]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self.diagnostics_pub.publish(array)

@@ -15,6 +15,7 @@ found (no data, stale input, gap, too little excitation, poor fit, implausible
 units or signs, ...), each with a severity OK / WARN / ERROR and a sentence.
 ``EstimateLog`` keeps the accepted estimates as rotated JSON-lines files.
 """
+
 from __future__ import annotations
 
 import math
@@ -28,10 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from .change import ChangeDetector, block_errors, covering_blocks, fit_gain
-from .jsonio import dumps_json
 from .dataset import DataError, resample_series
 from .estimators import DEFAULT_METHOD, MethodError, make_estimator
 from .estimators.base import MIN_RUDDER_STD, Estimate, excitation_shortfall
+from .jsonio import dumps_json
 from .metrics import free_run_fit
 from .samples import ROLES, Sample, Topics
 from .structure import Structure, StructureError
@@ -40,10 +41,10 @@ REQUIRED_ROLES = ("rudder", "heading", "yaw_rate")
 
 # Largest magnitude a sensor can plausibly report (SI); beyond it a sample is a fault.
 ABSURD_LIMITS = {
-    "rudder": math.radians(90.0),   # rad: no rudder turns beyond 90 deg
-    "heading": 1000.0,              # rad: wrapped or unwrapped compass heading
-    "yaw_rate": 3.0,                # rad/s (172 deg/s): no USV turns faster
-    "speed": 50.0,                  # m/s
+    "rudder": math.radians(90.0),  # rad: no rudder turns beyond 90 deg
+    "heading": 1000.0,  # rad: wrapped or unwrapped compass heading
+    "yaw_rate": 3.0,  # rad/s (172 deg/s): no USV turns faster
+    "speed": 50.0,  # m/s
 }
 
 OK, WARN, ERROR = 0, 1, 2
@@ -67,8 +68,8 @@ CONDITION_LEVELS = {
     "heading_in_degrees": WARN,
     "yaw_rate_sign": WARN,
     "rudder_saturated": WARN,
-    "wrong_message_type": WARN,     # reported by the node (ROS graph)
-    "estimate_log_failed": WARN,    # reported by the node
+    "wrong_message_type": WARN,  # reported by the node (ROS graph)
+    "estimate_log_failed": WARN,  # reported by the node
 }
 
 # A stored sample costs about 110 bytes (a tuple of two floats in a deque): one million per input,
@@ -77,29 +78,29 @@ MAX_WINDOW_SAMPLES = 1_000_000
 
 # Plausibility of heading against yaw rate: the heading change over intervals of HEADING_BASELINE
 # is regressed on the integrated yaw rate; the slope is 1 when both are rad and NED.
-HEADING_BASELINE = 1.0              # s
+HEADING_BASELINE = 1.0  # s
 MIN_TURN_RATE_STD = math.radians(0.5)  # rad/s: with less turning the slope says nothing
-DEGREES_SLOPE = 10.0                # slope beyond this: heading in degrees (57.3)
-DEGREE_WRAP = (300.0, 420.0)        # a heading step this large is a wrap at 360 (degrees)
+DEGREES_SLOPE = 10.0  # slope beyond this: heading in degrees (57.3)
+DEGREE_WRAP = (300.0, 420.0)  # a heading step this large is a wrap at 360 (degrees)
 # Rudder saturation: a single extreme value, within SATURATION_TOLERANCE of the steering gear's
 # limit, held (within SATURATION_TOLERANCE) for this share of the window.
 SATURATION_SHARE = 0.5
 SATURATION_TOLERANCE = math.radians(1.0)  # rad
-GAP_SAMPLES = 5                     # gap_threshold 0: an input pause of this many sample times splits
+GAP_SAMPLES = 5  # gap_threshold 0: an input pause of this many sample times splits
 
 # Trust in a new estimate against the last good one (see OnlineIdentifier._distrust).
-JUMP_STANDARD_ERRORS = 5.0          # a jump beyond this many joint standard errors needs evidence
-CLEAR_IMPROVEMENT = 2.0             # ... its free run over the newest data this many times better
-                                    # (mean squares) than the last good one's, or the next refit agreeing
-FREE_RUN_TOLERANCE = 1.25           # a new estimate's free run may miss the window at most this much
-                                    # more (mean squares) than the last good one's
+JUMP_STANDARD_ERRORS = 5.0  # a jump beyond this many joint standard errors needs evidence
+CLEAR_IMPROVEMENT = 2.0  # ... its free run over the newest data this many times better
+# (mean squares) than the last good one's, or the next refit agreeing
+FREE_RUN_TOLERANCE = 1.25  # a new estimate's free run may miss the window at most this much
+# more (mean squares) than the last good one's
 # Refitted on the new data after a change, the first set the data determine: the gain with the main
 # time constant, or alone, once the new data span this many main time constants (of the last good
 # estimate; shorter, the free run's unknown start dominates). The rudder offset is held: loading does
 # not move it, and a held rudder cannot tell it from the gain.
 GAIN_FITS = ((("K", "T", "T1"), 4.0), (("K",), 2.0))
-MIN_GAIN_SAMPLES = 20              # new samples needed for the gain refit after a change
-SCATTER_PAIRS = 20                  # successive estimates whose scatter sets the published uncertainty
+MIN_GAIN_SAMPLES = 20  # new samples needed for the gain refit after a change
+SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published uncertainty
 
 REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
 
@@ -108,8 +109,14 @@ REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
 # with the gain or the main time constant on a bound (no hull has K = 100 1/s), or it stopped
 # before it converged.
 STUCK_FLAGS = ("at_bound:K", "at_bound:T", "at_bound:T1")  # a warm start that ends here is refitted cold
-POOR_FIT_FLAGS = ("complex_time_constants", "K_out_of_bounds", "T_out_of_bounds", "T1_out_of_bounds",
-                  "T2_out_of_bounds", "oe_not_converged") + STUCK_FLAGS
+POOR_FIT_FLAGS = (
+    "complex_time_constants",
+    "K_out_of_bounds",
+    "T_out_of_bounds",
+    "T1_out_of_bounds",
+    "T2_out_of_bounds",
+    "oe_not_converged",
+) + STUCK_FLAGS
 
 
 DEFAULT_TOPICS = Topics()
@@ -126,28 +133,28 @@ class OnlineConfig:
     rudder_topic: str = DEFAULT_TOPICS.rudder
     heading_topic: str = DEFAULT_TOPICS.heading
     yaw_rate_topic: str = DEFAULT_TOPICS.yaw_rate
-    speed_topic: str = ""                 # empty: no speed input (DEFAULT_TOPICS.speed when wanted)
-    imu_topic: str = ""                   # sensor_msgs/Imu (ENU) instead of heading and yaw rate
-    sample_time: float = 0.1              # s, grid the window is resampled to
-    window_length: float = 180.0          # s of data in each fit
-    refit_period: float = 5.0             # s between refits
+    speed_topic: str = ""  # empty: no speed input (DEFAULT_TOPICS.speed when wanted)
+    imu_topic: str = ""  # sensor_msgs/Imu (ENU) instead of heading and yaw rate
+    sample_time: float = 0.1  # s, grid the window is resampled to
+    window_length: float = 180.0  # s of data in each fit
+    refit_period: float = 5.0  # s between refits
     model: str = "nomoto2"
     effects: tuple = ("rudder_offset", "cubic_yaw")
     method: str = DEFAULT_METHOD
-    min_window_length: float = 60.0       # s of data before the first fit
+    min_window_length: float = 60.0  # s of data before the first fit
     min_rudder_std: float = float(MIN_RUDDER_STD)  # rad: less rudder activity gives no new estimate
     rudder_limit: float = math.radians(35.0)  # rad, the steering gear's limit (rudder_saturated there)
-    min_fit_correlation: float = 0.8      # free-run yaw-rate correlation below this is a poor fit
-    stale_timeout: float = 1.0            # s without a sample on an input before it is stale
-    gap_threshold: float = 0.0            # s without a sample that splits the window; 0: GAP_SAMPLES
-                                          # sample times
-    clock_jump_threshold: float = 1.0     # s: a stamp this far back is a clock jump (window reset);
-                                          # forward, a step beyond max(this, refit_period) is one
-    max_window_samples: int = 20000       # hard bound on stored samples per input
-    prediction_horizon: float = 10.0      # s of free run behind the predicted yaw rate
-    change_ratio: float = 9.0             # newest free-run error / usual level (mean squares) that
-                                          # restarts the window (the vessel changed); 0: never
-    change_test_length: float = 30.0      # s of newest data the change test runs the model over
+    min_fit_correlation: float = 0.8  # free-run yaw-rate correlation below this is a poor fit
+    stale_timeout: float = 1.0  # s without a sample on an input before it is stale
+    gap_threshold: float = 0.0  # s without a sample that splits the window; 0: GAP_SAMPLES
+    # sample times
+    clock_jump_threshold: float = 1.0  # s: a stamp this far back is a clock jump (window reset);
+    # forward, a step beyond max(this, refit_period) is one
+    max_window_samples: int = 20000  # hard bound on stored samples per input
+    prediction_horizon: float = 10.0  # s of free run behind the predicted yaw rate
+    change_ratio: float = 9.0  # newest free-run error / usual level (mean squares) that
+    # restarts the window (the vessel changed); 0: never
+    change_test_length: float = 30.0  # s of newest data the change test runs the model over
 
     def __post_init__(self):
         effects = self.effects
@@ -155,10 +162,18 @@ class OnlineConfig:
             effects = [e for e in effects.split(",")]
         object.__setattr__(self, "effects", tuple(e.strip() for e in effects if e.strip()))
 
-    def validate(self) -> "OnlineConfig":
+    def validate(self) -> OnlineConfig:
         """Raise ConfigError naming the first bad value; return self when all are usable."""
-        positive = ("sample_time", "window_length", "refit_period", "stale_timeout",
-                    "clock_jump_threshold", "prediction_horizon", "change_test_length", "rudder_limit")
+        positive = (
+            "sample_time",
+            "window_length",
+            "refit_period",
+            "stale_timeout",
+            "clock_jump_threshold",
+            "prediction_horizon",
+            "change_test_length",
+            "rudder_limit",
+        )
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -166,36 +181,44 @@ class OnlineConfig:
         if self.sample_time > 1.0:
             raise ConfigError(f"sample_time {self.sample_time} s is too coarse for yaw dynamics; use <= 1 s")
         if not 0 < self.min_window_length <= self.window_length:
-            raise ConfigError(f"min_window_length must be in (0, window_length={self.window_length}] s, "
-                              f"got {self.min_window_length}")
+            raise ConfigError(
+                f"min_window_length must be in (0, window_length={self.window_length}] s, got {self.min_window_length}"
+            )
         if self.window_length < 20 * self.sample_time:
-            raise ConfigError(f"window_length {self.window_length} s holds fewer than 20 samples "
-                              f"of {self.sample_time} s")
+            raise ConfigError(
+                f"window_length {self.window_length} s holds fewer than 20 samples of {self.sample_time} s"
+            )
         if not (self.gap_threshold == 0 or self.sample_time <= self.gap_threshold < math.inf):
-            raise ConfigError(f"gap_threshold must be 0 ({GAP_SAMPLES} sample times) or >= sample_time "
-                              f"{self.sample_time} s, got {self.gap_threshold!r}")
+            raise ConfigError(
+                f"gap_threshold must be 0 ({GAP_SAMPLES} sample times) or >= sample_time "
+                f"{self.sample_time} s, got {self.gap_threshold!r}"
+            )
         if self.rudder_limit > math.radians(90.0):
             raise ConfigError(f"rudder_limit must be <= 1.571 rad (90 deg), got {self.rudder_limit}")
         if not 0 <= self.min_rudder_std < 0.5:
             raise ConfigError(f"min_rudder_std must be in [0, 0.5) rad, got {self.min_rudder_std}")
         if not (self.change_ratio == 0 or 1 < self.change_ratio < math.inf):
-            raise ConfigError(f"change_ratio must be 0 (no change test) or a finite number > 1, "
-                              f"got {self.change_ratio!r}")
+            raise ConfigError(
+                f"change_ratio must be 0 (no change test) or a finite number > 1, got {self.change_ratio!r}"
+            )
         if not 0 <= self.min_fit_correlation <= 1:
             raise ConfigError(f"min_fit_correlation must be in [0, 1], got {self.min_fit_correlation}")
         needed = int(math.ceil(self.window_length / self.sample_time))
         if self.max_window_samples > MAX_WINDOW_SAMPLES:
-            raise ConfigError(f"max_window_samples {self.max_window_samples} would take about "
-                              f"{4 * 110 * self.max_window_samples / 1e9:.1f} GB for four inputs; "
-                              f"use <= {MAX_WINDOW_SAMPLES}")
+            raise ConfigError(
+                f"max_window_samples {self.max_window_samples} would take about "
+                f"{4 * 110 * self.max_window_samples / 1e9:.1f} GB for four inputs; "
+                f"use <= {MAX_WINDOW_SAMPLES}"
+            )
         if self.max_window_samples < max(needed, 100):
-            raise ConfigError(f"max_window_samples {self.max_window_samples} cannot hold a "
-                              f"{self.window_length} s window at {self.sample_time} s "
-                              f"(need >= {max(needed, 100)})")
+            raise ConfigError(
+                f"max_window_samples {self.max_window_samples} cannot hold a "
+                f"{self.window_length} s window at {self.sample_time} s "
+                f"(need >= {max(needed, 100)})"
+            )
         for name in ("rudder_topic", "heading_topic", "yaw_rate_topic"):
             if not self.imu_topic and not getattr(self, name):
-                raise ConfigError(f"{name} is empty; name the topic (or set imu_topic for heading "
-                                  "and yaw rate)")
+                raise ConfigError(f"{name} is empty; name the topic (or set imu_topic for heading and yaw rate)")
         try:
             structure = self.structure()
             make_estimator(self.method)
@@ -213,7 +236,7 @@ class OnlineConfig:
         """s without a sample that splits the window: gap_threshold, or GAP_SAMPLES sample times."""
         return self.gap_threshold or GAP_SAMPLES * self.sample_time
 
-    def changed(self, **values) -> "OnlineConfig":
+    def changed(self, **values) -> OnlineConfig:
         """A validated copy with some values replaced."""
         return replace(self, **values).validate()
 
@@ -231,14 +254,14 @@ class OnlineConfig:
 class RefitRecord:
     """The outcome of one refit: the estimate in force and what was found on the way."""
 
-    time: float                         # s, clock time the refit ran at
-    conditions: dict                    # condition name -> sentence
-    estimate: dict | None = None        # Estimate.to_json() in force (new or last good)
-    new_estimate: bool = False          # True when this refit produced the estimate
+    time: float  # s, clock time the refit ran at
+    conditions: dict  # condition name -> sentence
+    estimate: dict | None = None  # Estimate.to_json() in force (new or last good)
+    new_estimate: bool = False  # True when this refit produced the estimate
     window: tuple = (math.nan, math.nan)  # s, start and end of the data in the window
     predicted_yaw_rate: float = math.nan  # rad/s at the window end, free run from measured state
-    measured_yaw_rate: float = math.nan   # rad/s at the window end
-    compute_seconds: float = 0.0        # wall time of the refit
+    measured_yaw_rate: float = math.nan  # rad/s at the window end
+    compute_seconds: float = 0.0  # wall time of the refit
     counts: dict = field(default_factory=dict)  # cumulative input counts by outcome
 
     @property
@@ -287,17 +310,17 @@ class OnlineIdentifier:
         cap = config.max_window_samples
         self._window = {role: deque(maxlen=cap) for role in ROLES}
         self._newest = {role: -math.inf for role in ROLES}  # s, last accepted stamp per role
-        self._latest_time = -math.inf   # s, newest stamp or clock reading seen
+        self._latest_time = -math.inf  # s, newest stamp or clock reading seen
         self._next_due: float | None = None
         self.counts = {"accepted": 0, **{r: 0 for r in REJECTIONS}, "clock_jumps": 0}
         self._reported = dict(self.counts)
         self._last_jump = 0.0
-        self._last_good = None      # Estimate of the current structure
+        self._last_good = None  # Estimate of the current structure
         self._last_good_window = (math.nan, math.nan)
         self._change = ChangeDetector(config.change_ratio, config.change_test_length, _short_test(config))
         self._window_floor = -math.inf  # s: where the vessel last changed; older data are dropped
-        self._change_note = None    # sentence reported until the first estimate after a change
-        self._candidate = None      # the last estimate held for jumping: the next may confirm it
+        self._change_note = None  # sentence reported until the first estimate after a change
+        self._candidate = None  # the last estimate held for jumping: the next may confirm it
         self._scatter = EstimateScatter()
 
     # --- configuration ---------------------------------------------------
@@ -361,10 +384,12 @@ class OnlineIdentifier:
                 self._window[role].clear()
                 self._newest[role] = -math.inf
             self._window_floor = -math.inf
-            self._change.forget()   # its references belong to the old time line
+            self._change.forget()  # its references belong to the old time line
             self._scatter.forget()
-        elif not now > self._latest_time + max(config.clock_jump_threshold, config.refit_period) \
-                or self._latest_time == -math.inf:
+        elif (
+            not now > self._latest_time + max(config.clock_jump_threshold, config.refit_period)
+            or self._latest_time == -math.inf
+        ):
             self._latest_time = max(self._latest_time, now)
             return
         self._last_jump = now - self._latest_time
@@ -399,7 +424,7 @@ class OnlineIdentifier:
         started = wallclock.perf_counter()
         with self._lock:
             self._advance_schedule(now)
-            self._observe_clock(now)   # after: a clock jump restarts the schedule from now
+            self._observe_clock(now)  # after: a clock jump restarts the schedule from now
             config = self._config
             for role in ROLES:
                 self._prune(self._window[role], max(now - config.window_length, self._window_floor))
@@ -443,57 +468,73 @@ class OnlineIdentifier:
         else:
             span = min(series[r][-1, 0] for r in roles) - max(series[r][0, 0] for r in roles)
             if span < config.min_window_length - 0.5 * config.sample_time:
-                conditions["window_filling"] = (f"window holds {max(span, 0):.0f} s of "
-                                                f"{config.min_window_length:g} s needed for a first fit")
-        stale = [f"{r} ({now - newest[r]:.1f} s)" for r in roles
-                 if math.isfinite(newest[r]) and now - newest[r] > config.stale_timeout]
+                conditions["window_filling"] = (
+                    f"window holds {max(span, 0):.0f} s of {config.min_window_length:g} s needed for a first fit"
+                )
+        stale = [
+            f"{r} ({now - newest[r]:.1f} s)"
+            for r in roles
+            if math.isfinite(newest[r]) and now - newest[r] > config.stale_timeout
+        ]
         if stale:
             conditions["stale_input"] = "no new samples on " + ", ".join(stale)
         rejected = {k: fresh[k] for k in REJECTIONS if fresh[k]}
         if rejected:
             conditions["rejected_samples"] = "rejected since last refit: " + ", ".join(
-                f"{n} {k.replace('_', '-')}" for k, n in rejected.items())
+                f"{n} {k.replace('_', '-')}" for k, n in rejected.items()
+            )
         if fresh["clock_jumps"] and last_jump < 0:
-            conditions["clock_jump"] = (f"clock jumped back {-last_jump:.1f} s; "
-                                        "window and schedule were reset")
+            conditions["clock_jump"] = f"clock jumped back {-last_jump:.1f} s; window and schedule were reset"
         elif fresh["clock_jumps"]:
-            conditions["clock_jump"] = (f"clock jumped forward {last_jump:.1f} s (or every input "
-                                        "fell silent); schedule restarted, the window keeps only "
-                                        f"the last {config.window_length:g} s")
+            conditions["clock_jump"] = (
+                f"clock jumped forward {last_jump:.1f} s (or every input "
+                "fell silent); schedule restarted, the window keeps only "
+                f"the last {config.window_length:g} s"
+            )
         return conditions
 
     def _fit(self, config: OnlineConfig, series: dict, last_good, record: RefitRecord) -> None:
         roles = [r for r in ROLES if r != "speed" or config.speed_topic]
         try:
-            dataset = resample_series({r: (series[r][:, 0], series[r][:, 1]) for r in roles},
-                                      config.sample_time, config.gap)
+            dataset = resample_series(
+                {r: (series[r][:, 0], series[r][:, 1]) for r in roles}, config.sample_time, config.gap
+            )
         except DataError as exc:
             record.conditions["refit_failed"] = f"window unusable: {exc}"
             return
         structure = config.structure()
         if last_good is not None and self._change_note is None:
             dataset = self._test_for_change(config, structure, dataset, record)
-        if self._change_note is not None and last_good is not None \
-                and dataset.duration < config.min_window_length - 0.5 * config.sample_time:
+        if (
+            self._change_note is not None
+            and last_good is not None
+            and dataset.duration < config.min_window_length - 0.5 * config.sample_time
+        ):
             self._follow_gain(config, structure, dataset, last_good, record)
             return
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.gaps:
             longest = max(b - a for a, b in dataset.gaps)
-            record.conditions["gap_in_window"] = (f"{len(dataset.gaps)} gap(s) in the window, longest "
-                                                  f"{longest:.1f} s; fitting the segments apart")
+            record.conditions["gap_in_window"] = (
+                f"{len(dataset.gaps)} gap(s) in the window, longest {longest:.1f} s; fitting the segments apart"
+            )
         record.conditions.update(_rudder_saturation(dataset.rudder, config.rudder_limit))
         rudder_std = float(np.std(dataset.rudder))
         if rudder_std < config.min_rudder_std:
             record.conditions["too_little_excitation"] = (
                 f"rudder std {math.degrees(rudder_std):.2f} deg < "
-                f"{math.degrees(config.min_rudder_std):.2f} deg; keeping the last good estimate")
+                f"{math.degrees(config.min_rudder_std):.2f} deg; keeping the last good estimate"
+            )
             return
         estimator = make_estimator(config.method)
         try:
             estimate = None
-            if hasattr(estimator, "refine") and last_good is not None and last_good.ok \
-                    and last_good.method == config.method:
+            if (
+                hasattr(estimator, "refine")
+                and last_good is not None
+                and last_good.ok
+                and last_good.method == config.method
+            ):
                 estimate = estimator.refine(structure, dataset, last_good)  # warm start
                 if any(f in STUCK_FLAGS for f in estimate.flags):
                     estimate = None  # the vessel changed beyond the warm start's reach: fit afresh
@@ -504,11 +545,13 @@ class OnlineIdentifier:
             return
         if not estimate.ok:
             if "low_excitation" in estimate.flags:
-                record.conditions["too_little_excitation"] = \
+                record.conditions["too_little_excitation"] = (
                     f"{excitation_shortfall(dataset)}; keeping the last good estimate"
+                )
             else:
-                record.conditions["refit_failed"] = (f"estimate rejected ({', '.join(estimate.flags)}); "
-                                                     "keeping the last good estimate")
+                record.conditions["refit_failed"] = (
+                    f"estimate rejected ({', '.join(estimate.flags)}); keeping the last good estimate"
+                )
             return
         undetermined = excitation_shortfall(dataset, estimate.parameters, estimate.std_errors)
         if undetermined:
@@ -520,7 +563,8 @@ class OnlineIdentifier:
             record.conditions["poor_fit"] = (
                 f"free-run yaw-rate correlation {correlation:.2f} (needs >= "
                 f"{config.min_fit_correlation:g}){', ' + ', '.join(at_bounds) if at_bounds else ''}: "
-                "the model misses the motion; keeping the last good estimate")
+                "the model misses the motion; keeping the last good estimate"
+            )
             return
         published = replace(estimate, std_errors=self._scatter.honest(estimate))
         distrust = self._distrust(config, structure, published, dataset, last_good)
@@ -542,7 +586,8 @@ class OnlineIdentifier:
         record.estimate.pop("info", None)
         record.new_estimate = True
         record.predicted_yaw_rate, record.measured_yaw_rate = self._predict(
-            config, structure, estimate.parameters, dataset)
+            config, structure, estimate.parameters, dataset
+        )
         with self._lock:
             if (config.model, config.effects) == (self._config.model, self._config.effects):
                 self._last_good, self._last_good_window = published, record.window
@@ -572,15 +617,24 @@ class OnlineIdentifier:
             record.conditions["refit_failed"] = f"gain refit after the change: {type(exc).__name__}: {exc}"
             return
         fit = free_run_fit(dataset.heading, dataset.yaw_rate, psi, r)
-        estimate = Estimate(structure, last_good.method, params, dict(last_good.std_errors, **errors), fit,
-                            dataset.n_samples, flags=["diverged"] if fit["diverged"] else [], window=record.window)
-        undetermined = "it diverged" if fit["diverged"] else excitation_shortfall(
-            dataset, {n: params[n] for n in errors}, errors)
+        estimate = Estimate(
+            structure,
+            last_good.method,
+            params,
+            dict(last_good.std_errors, **errors),
+            fit,
+            dataset.n_samples,
+            flags=["diverged"] if fit["diverged"] else [],
+            window=record.window,
+        )
+        undetermined = (
+            "it diverged" if fit["diverged"] else excitation_shortfall(dataset, {n: params[n] for n in errors}, errors)
+        )
         reason = undetermined or self._distrust(config, structure, estimate, dataset, last_good)
         if reason:
             record.conditions["too_little_excitation" if undetermined else "implausible_estimate"] = (
-                f"gain refit on the {dataset.duration:.0f} s since the change: {reason}; keeping the last "
-                "good estimate")
+                f"gain refit on the {dataset.duration:.0f} s since the change: {reason}; keeping the last good estimate"
+            )
             return
         self._publish(config, structure, estimate, estimate, dataset, record, scatter=False)
 
@@ -601,29 +655,39 @@ class OnlineIdentifier:
             return None
         n = int(round(config.change_test_length / dataset.sample_time))
         blocks = covering_blocks(dataset, n)
-        new_error, old_error = (float(np.mean(block_errors(structure, p, dataset, blocks)))
-                                for p in (estimate.parameters, last_good.parameters))
+        new_error, old_error = (
+            float(np.mean(block_errors(structure, p, dataset, blocks)))
+            for p in (estimate.parameters, last_good.parameters)
+        )
         if not new_error <= FREE_RUN_TOLERANCE * old_error:
-            return (f"its free run misses the window more than the last good estimate's (yaw-rate rms "
-                    f"{math.degrees(math.sqrt(new_error)):.3f} vs {math.degrees(math.sqrt(old_error)):.3f} deg/s)")
+            return (
+                f"its free run misses the window more than the last good estimate's (yaw-rate rms "
+                f"{math.degrees(math.sqrt(new_error)):.3f} vs {math.degrees(math.sqrt(old_error)):.3f} deg/s)"
+            )
         jump, name = _jump(estimate, last_good)
         if jump <= JUMP_STANDARD_ERRORS:
             return None
         newest = blocks[-1:]
-        new_newest, old_newest = (float(block_errors(structure, p, dataset, newest)[0])
-                                  for p in (estimate.parameters, last_good.parameters))
+        new_newest, old_newest = (
+            float(block_errors(structure, p, dataset, newest)[0]) for p in (estimate.parameters, last_good.parameters)
+        )
         if old_newest >= CLEAR_IMPROVEMENT * new_newest:
             return None
         candidate, self._candidate = self._candidate, estimate
-        if candidate is not None and candidate.structure.label() == structure.label() \
-                and _jump(estimate, candidate)[0] <= JUMP_STANDARD_ERRORS:
+        if (
+            candidate is not None
+            and candidate.structure.label() == structure.label()
+            and _jump(estimate, candidate)[0] <= JUMP_STANDARD_ERRORS
+        ):
             return None
-        return (f"{name} {estimate.parameters[name]:.4g} +- {estimate.std_errors[name]:.2g} jumps "
-                f"{jump:.0f} standard errors from the last good {last_good.parameters[name]:.4g} +- "
-                f"{last_good.std_errors[name]:.2g}, and its free run over the newest "
-                f"{config.change_test_length:g} s is not clearly better (yaw-rate rms "
-                f"{math.degrees(math.sqrt(new_newest)):.3f} vs {math.degrees(math.sqrt(old_newest)):.3f} "
-                "deg/s); held until a refit confirms it")
+        return (
+            f"{name} {estimate.parameters[name]:.4g} +- {estimate.std_errors[name]:.2g} jumps "
+            f"{jump:.0f} standard errors from the last good {last_good.parameters[name]:.4g} +- "
+            f"{last_good.std_errors[name]:.2g}, and its free run over the newest "
+            f"{config.change_test_length:g} s is not clearly better (yaw-rate rms "
+            f"{math.degrees(math.sqrt(new_newest)):.3f} vs {math.degrees(math.sqrt(old_newest)):.3f} "
+            "deg/s); held until a refit confirms it"
+        )
 
     def _test_for_change(self, config, structure, dataset, record):
         """Run the change test; on a change, restart the window where it happened and return the
@@ -634,12 +698,14 @@ class OnlineIdentifier:
             return dataset
         if changed_at is None:
             return dataset
-        note = (f"the newest model fitted before the newest data (the last {_short_test(config):g} or "
-                f"{config.change_test_length:g} s) mispredicts them "
-                f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
-                f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
-                f"the window restarts at {changed_at:.1f} s, where the error stepped up (K refitted on the "
-                f"new data with the time constants held until they span {config.min_window_length:g} s)")
+        note = (
+            f"the newest model fitted before the newest data (the last {_short_test(config):g} or "
+            f"{config.change_test_length:g} s) mispredicts them "
+            f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
+            f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
+            f"the window restarts at {changed_at:.1f} s, where the error stepped up (K refitted on the "
+            f"new data with the time constants held until they span {config.min_window_length:g} s)"
+        )
         with self._lock:
             self._window_floor, self._change_note = changed_at, note
             self._scatter.forget()  # the new response's estimates scatter about other values
@@ -667,14 +733,21 @@ def _as_array(window: deque) -> np.ndarray:
 
 def _truncation(config: OnlineConfig, series: dict, full: list, now: float) -> dict:
     """The sample bound cut an input's window short of ``window_length``."""
-    short = [f"{role} ({now - series[role][0, 0]:.0f} s)" for role in full
-             if len(series[role]) and series[role][0, 0] > now - config.window_length + config.sample_time]
+    short = [
+        f"{role} ({now - series[role][0, 0]:.0f} s)"
+        for role in full
+        if len(series[role]) and series[role][0, 0] > now - config.window_length + config.sample_time
+    ]
     if not short:
         return {}
-    return {"window_truncated": (f"max_window_samples ({config.max_window_samples}) holds less than "
-                                 f"the {config.window_length:g} s window of {', '.join(short)}: the "
-                                 "input is faster than planned; raise max_window_samples or shorten "
-                                 "window_length")}
+    return {
+        "window_truncated": (
+            f"max_window_samples ({config.max_window_samples}) holds less than "
+            f"the {config.window_length:g} s window of {', '.join(short)}: the "
+            "input is faster than planned; raise max_window_samples or shorten "
+            "window_length"
+        )
+    }
 
 
 def _heading_plausibility(series: dict) -> dict:
@@ -704,16 +777,27 @@ def _heading_plausibility(series: dict) -> dict:
             slope = float(np.dot(changed, turned) / np.dot(turned, turned))
             correlation = float(np.corrcoef(changed, turned)[0, 1])
     if abs(slope) > DEGREES_SLOPE or degree_wraps:
-        evidence = (f"it changes {abs(slope):.0f}x as fast as the yaw rate turns the boat"
-                    if abs(slope) > DEGREES_SLOPE else f"it steps by about 360 {degree_wraps} time(s)")
-        return {"heading_in_degrees": (f"the heading looks like degrees, not rad ({evidence}); "
-                                       "publish it in rad: heading-based fit figures are wrong "
-                                       "until then")}
+        evidence = (
+            f"it changes {abs(slope):.0f}x as fast as the yaw rate turns the boat"
+            if abs(slope) > DEGREES_SLOPE
+            else f"it steps by about 360 {degree_wraps} time(s)"
+        )
+        return {
+            "heading_in_degrees": (
+                f"the heading looks like degrees, not rad ({evidence}); "
+                "publish it in rad: heading-based fit figures are wrong "
+                "until then"
+            )
+        }
     if slope < -0.5 and correlation < -0.5:
-        return {"yaw_rate_sign": (f"heading and yaw rate turn opposite ways (correlation "
-                                  f"{correlation:.2f}): one of them is counter-clockwise positive "
-                                  "(ENU); negate the yaw rate (or heading) to NED, or use imu_topic "
-                                  "for an Imu")}
+        return {
+            "yaw_rate_sign": (
+                f"heading and yaw rate turn opposite ways (correlation "
+                f"{correlation:.2f}): one of them is counter-clockwise positive "
+                "(ENU); negate the yaw rate (or heading) to NED, or use imu_topic "
+                "for an Imu"
+            )
+        }
     return {}
 
 
@@ -729,9 +813,13 @@ def _rudder_saturation(rudder: np.ndarray, limit: float) -> dict:
     for extreme in (np.percentile(rudder, 99.5), np.percentile(rudder, 0.5)):
         share = float(np.mean(np.abs(rudder - extreme) <= SATURATION_TOLERANCE))
         if abs(extreme) >= limit - SATURATION_TOLERANCE and share >= SATURATION_SHARE:
-            return {"rudder_saturated": (f"rudder held at {math.degrees(extreme):+.1f} deg for "
-                                         f"{100 * share:.0f} % of the window (saturated or stuck): "
-                                         "the fit rests on the remaining samples")}
+            return {
+                "rudder_saturated": (
+                    f"rudder held at {math.degrees(extreme):+.1f} deg for "
+                    f"{100 * share:.0f} % of the window (saturated or stuck): "
+                    "the fit rests on the remaining samples"
+                )
+            }
     return {}
 
 
@@ -795,7 +883,7 @@ class EstimateScatter:
             for name in squares:
                 joint = math.hypot(a.std_errors.get(name, 0.0), b.std_errors.get(name, 0.0))
                 if joint > 0 and math.isfinite(joint) and name in a.parameters:
-                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / (fresh * joint ** 2))
+                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / (fresh * joint**2))
         return {name: max(1.0, math.sqrt(float(np.mean(z)))) if z else 1.0 for name, z in squares.items()}
 
     def honest(self, estimate) -> dict:
@@ -816,16 +904,16 @@ class EstimateLog:
 
     def __init__(self, directory, max_bytes: int = 10_000_000, backups: int = 5):
         if max_bytes < 1000 or backups < 0:
-            raise ConfigError(f"log_max_bytes must be >= 1000 and log_backups >= 0, got "
-                              f"{max_bytes} and {backups}")
+            raise ConfigError(f"log_max_bytes must be >= 1000 and log_backups >= 0, got {max_bytes} and {backups}")
         self.path = Path(directory) / self.FILE_NAME
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             with self.path.open("ab"):
                 pass
         except OSError as exc:
-            raise ConfigError(f"cannot write the estimate log {self.path}: {exc.strerror or exc}; "
-                              "choose another log_directory") from None
+            raise ConfigError(
+                f"cannot write the estimate log {self.path}: {exc.strerror or exc}; choose another log_directory"
+            ) from None
         self.max_bytes, self.backups = max_bytes, backups
 
     def write(self, record: dict) -> None:

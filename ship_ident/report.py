@@ -1,4 +1,5 @@
 """HTML report of a diagnosis: index.html with matplotlib PNGs (angles in degrees)."""
+
 from __future__ import annotations
 
 import html
@@ -38,31 +39,54 @@ def plot_measured_vs_model(d: Diagnosis, directory: Path) -> str:
     shift = d.dataset.time[-1] + 60.0 - d.held_out.time[0] if d.cross_manoeuvre else 0.0
     held_out = replace(d.held_out, time=d.held_out.time + shift)
     for ax, scale, label, measured, train, held in (
-            (axes[0], DEG, "heading (deg)", "heading", train_psi, d.run.heading),
-            (axes[1], DEG, "yaw rate (deg/s)", "yaw_rate", train_r, d.run.yaw_rate)):
+        (axes[0], DEG, "heading (deg)", "heading", train_psi, d.run.heading),
+        (axes[1], DEG, "yaw rate (deg/s)", "yaw_rate", train_r, d.run.yaw_rate),
+    ):
         for k, (a, b) in enumerate(held_out.segments):
-            ax.axvspan(held_out.time[a], held_out.time[b - 1], color="tab:blue", alpha=0.08, lw=0,
-                       label="held-out window" if k == 0 else None)
+            ax.axvspan(
+                held_out.time[a],
+                held_out.time[b - 1],
+                color="tab:blue",
+                alpha=0.08,
+                lw=0,
+                label="held-out window" if k == 0 else None,
+            )
         for k, seg in enumerate(d.worst_segments):
             moved = shift if seg.get("held_out") else 0.0
-            ax.axvspan(seg["start"] + moved, seg["end"] + moved, ymin=0.0, ymax=0.04, color="tab:orange",
-                       alpha=0.9, lw=0,
-                       label=f"worst {len(d.worst_segments)} segments" if k == 0 else None)
+            ax.axvspan(
+                seg["start"] + moved,
+                seg["end"] + moved,
+                ymin=0.0,
+                ymax=0.04,
+                color="tab:orange",
+                alpha=0.9,
+                lw=0,
+                label=f"worst {len(d.worst_segments)} segments" if k == 0 else None,
+            )
         ax.plot(d.dataset.time, getattr(d.dataset, measured) * scale, color="black", lw=0.8, label="measured")
         if d.cross_manoeuvre:
             _segments_plot(ax, held_out, getattr(held_out, measured) * scale, None, color="black", lw=0.8)
-        _segments_plot(ax, d.training, train * scale, "model, fitting part (in-sample)",
-                       color="tab:gray", lw=0.9)
+        _segments_plot(ax, d.training, train * scale, "model, fitting part (in-sample)", color="tab:gray", lw=0.9)
         _segments_plot(ax, held_out, held * scale, "model, held-out free run", color="tab:blue", lw=1.2)
         if d.before_run is not None:
-            _segments_plot(ax, held_out, getattr(d.before_run, measured) * scale,
-                           f"before: {d.before.structure.label()}", color="tab:red", lw=0.8, ls="--")
+            _segments_plot(
+                ax,
+                held_out,
+                getattr(d.before_run, measured) * scale,
+                f"before: {d.before.structure.label()}",
+                color="tab:red",
+                lw=0.8,
+                ls="--",
+            )
         ax.set_ylabel(label)
     axes[0].legend(fontsize=7, loc="best", ncol=2)
-    axes[0].set_title(f"{d.structure.label()}: free runs, each window from the measured state "
-                      "(orange ticks: worst segments)", fontsize=9)
-    axes[1].set_xlabel("time (s)" + (f"; held-out recordings from {shift + d.held_out.time[0]:.0f} s"
-                                     if d.cross_manoeuvre else ""))
+    axes[0].set_title(
+        f"{d.structure.label()}: free runs, each window from the measured state (orange ticks: worst segments)",
+        fontsize=9,
+    )
+    axes[1].set_xlabel(
+        "time (s)" + (f"; held-out recordings from {shift + d.held_out.time[0]:.0f} s" if d.cross_manoeuvre else "")
+    )
     return _save(fig, directory, "measured_vs_model.png")
 
 
@@ -72,7 +96,7 @@ def plot_residual_features(d: Diagnosis, directory: Path) -> str:
     cols = 3
     rows = max(1, int(np.ceil(len(items) / cols)))
     fig, axes = plt.subplots(rows, cols, figsize=(10, 2.8 * rows), squeeze=False)
-    for ax in axes.ravel()[len(items):]:
+    for ax in axes.ravel()[len(items) :]:
         ax.axis("off")
     for ax, (name, ev) in zip(axes.ravel(), items):
         residual = (ev.residual if ev.residual is not None else d.context.equation_residual) * DEG
@@ -98,8 +122,10 @@ def plot_correlations(d: Diagnosis, directory: Path) -> str:
     t = d.residual_tests
     lags = np.array(t["lags"]) * t["lag_step"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3))
-    for ax, values, title in ((axes[0], t["autocorrelation"], "autocorrelation of the yaw-rate residual"),
-                              (axes[1], t["cross_correlation_rudder"], "cross-correlation rudder -> residual")):
+    for ax, values, title in (
+        (axes[0], t["autocorrelation"], "autocorrelation of the yaw-rate residual"),
+        (axes[1], t["cross_correlation_rudder"], "cross-correlation rudder -> residual"),
+    ):
         ax.vlines(lags, 0, values, color="tab:blue", lw=1)
         ax.axhspan(-t["bound"], t["bound"], color="tab:green", alpha=0.2, label="95 % bounds")
         ax.axhline(0, color="black", lw=0.5)
@@ -107,8 +133,14 @@ def plot_correlations(d: Diagnosis, directory: Path) -> str:
         ax.set_ylabel("normalised correlation (-)", fontsize=8)
         ax.set_title(title, fontsize=9)
     if not np.any(t["cross_correlation_rudder"]):
-        axes[1].text(0.5, 0.5, "rudder constant in the held-out windows:\nno cross-correlation to show",
-                     transform=axes[1].transAxes, ha="center", fontsize=8)
+        axes[1].text(
+            0.5,
+            0.5,
+            "rudder constant in the held-out windows:\nno cross-correlation to show",
+            transform=axes[1].transAxes,
+            ha="center",
+            fontsize=8,
+        )
     axes[0].legend(fontsize=7)
     return _save(fig, directory, "correlations.png")
 
@@ -139,11 +171,11 @@ def plot_taylor(d: Diagnosis, directory: Path) -> str:
         ax.plot(grid, np.ones_like(grid), color="black", lw=0.5)
         ticks = np.array([0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 0.95, 0.99])
         ax.set_thetagrids(np.degrees(np.arccos(ticks)), [f"{t:g}" for t in ticks], fontsize=7)
-        ax.text(np.radians(52), ax.get_rmax() * 1.12, "correlation R", fontsize=8, rotation=-38,
-                ha="center", va="center")
+        ax.text(
+            np.radians(52), ax.get_rmax() * 1.12, "correlation R", fontsize=8, rotation=-38, ha="center", va="center"
+        )
         ax.set_xlabel("STD ratio (model / measured)", fontsize=8, labelpad=14)
-        ax.set_title(f"{signal.replace('_', ' ')} (held-out free runs); dotted arcs: E' = 0.25, 0.5, 1",
-                     fontsize=8)
+        ax.set_title(f"{signal.replace('_', ' ')} (held-out free runs); dotted arcs: E' = 0.25, 0.5, 1", fontsize=8)
     axes[1].legend(fontsize=6, loc="upper right", bbox_to_anchor=(1.35, 1.0))
     return _save(fig, directory, "taylor.png")
 
@@ -158,7 +190,9 @@ def plot_before_after(d: Diagnosis, directory: Path) -> str:
     y = np.arange(len(rows))
     for ax, key, unit in ((axes[0], "rmse_heading", "deg"), (axes[1], "rmse_yaw_rate", "deg/s")):
         values = [fit[key] * DEG for _, fit in rows]
-        ax.barh(y, values, color=["tab:gray"] * (2 if d.before else 1) + ["tab:blue"] * (len(rows) - (2 if d.before else 1)))
+        ax.barh(
+            y, values, color=["tab:gray"] * (2 if d.before else 1) + ["tab:blue"] * (len(rows) - (2 if d.before else 1))
+        )
         ax.set_yticks(y, [label for label, _ in rows], fontsize=8)
         ax.invert_yaxis()
         ax.set_xlabel(f"held-out free-run RMSE ({unit})")
@@ -207,32 +241,72 @@ def write_report(d: Diagnosis, directory, source: str = "") -> Path:
         (plot_taylor(d, directory), "Taylor diagram"),
         (plot_parameters(d, directory), "Parameters"),
     ]
-    measures = _table(["model", "signal", "RMSE", "R", "E'", "STD ratio", "fit %"], [
-        [row["model"], row["signal"],
-         f"{row['rmse'] * DEG:.3g} {'deg' if row['signal'] == 'heading' else 'deg/s'}",
-         f"{row['r']:.3f}", f"{row['e_centred']:.3f}", f"{row['std_ratio']:.3f}", f"{row['fit_percent']:.1f}"]
-        for row in signal_table(d)])
-    candidates = _table(["effect", "improvement", "heading", "yaw rate", "t", "significant", "evidence"], [
-        [c.effect, f"{100 * c.improvement:.1f} %", f"{c.rmse_heading_after * DEG:.3g} deg",
-         f"{c.rmse_yaw_rate_after * DEG:.3g} deg/s", f"{c.t_statistic:.1f}", "yes" if c.significant else "no",
-         c.evidence.sentence + (f" ({c.note})" if c.note else "")
-         + (f"; much worse held out: {c.extrapolation}" if c.extrapolation else "")] for c in d.candidates])
-    worst = _table(["recording", "time (s)", "heading RMSE (deg)", "yaw-rate RMSE (deg/s)", "turning", "|r| (deg/s)",
-                    "heading", "rudder std (deg)", "speed (m/s)"], [
-        [s.get("recording", "") + (" (held out)" if s.get("held_out") and "held out" not in
-                                   s.get("recording", "") else ""),
-         f"{s['start']:.0f}-{s['end']:.0f}",
-         f"{s['rmse_heading'] * DEG:.3g}" + (f" (was {s['rmse_heading_before'] * DEG:.3g})"
-                                             if "rmse_heading_before" in s else ""),
-         f"{s['rmse_yaw_rate'] * DEG:.3g}" + (f" (was {s['rmse_yaw_rate_before'] * DEG:.3g})"
-                                              if "rmse_yaw_rate_before" in s else ""),
-         s["conditions"]["turning"], f"{s['conditions']['mean_abs_yaw_rate_deg_s']:.2f}",
-         f"{s['conditions']['heading_deg']:.0f} ({s['conditions']['heading_sector']})",
-         f"{s['conditions']['rudder_std_deg']:.1f}",
-         f"{s['conditions']['speed']:.2f}" if "speed" in s["conditions"] else "-"] for s in d.worst_segments])
+    measures = _table(
+        ["model", "signal", "RMSE", "R", "E'", "STD ratio", "fit %"],
+        [
+            [
+                row["model"],
+                row["signal"],
+                f"{row['rmse'] * DEG:.3g} {'deg' if row['signal'] == 'heading' else 'deg/s'}",
+                f"{row['r']:.3f}",
+                f"{row['e_centred']:.3f}",
+                f"{row['std_ratio']:.3f}",
+                f"{row['fit_percent']:.1f}",
+            ]
+            for row in signal_table(d)
+        ],
+    )
+    candidates = _table(
+        ["effect", "improvement", "heading", "yaw rate", "t", "significant", "evidence"],
+        [
+            [
+                c.effect,
+                f"{100 * c.improvement:.1f} %",
+                f"{c.rmse_heading_after * DEG:.3g} deg",
+                f"{c.rmse_yaw_rate_after * DEG:.3g} deg/s",
+                f"{c.t_statistic:.1f}",
+                "yes" if c.significant else "no",
+                c.evidence.sentence
+                + (f" ({c.note})" if c.note else "")
+                + (f"; much worse held out: {c.extrapolation}" if c.extrapolation else ""),
+            ]
+            for c in d.candidates
+        ],
+    )
+    worst = _table(
+        [
+            "recording",
+            "time (s)",
+            "heading RMSE (deg)",
+            "yaw-rate RMSE (deg/s)",
+            "turning",
+            "|r| (deg/s)",
+            "heading",
+            "rudder std (deg)",
+            "speed (m/s)",
+        ],
+        [
+            [
+                s.get("recording", "")
+                + (" (held out)" if s.get("held_out") and "held out" not in s.get("recording", "") else ""),
+                f"{s['start']:.0f}-{s['end']:.0f}",
+                f"{s['rmse_heading'] * DEG:.3g}"
+                + (f" (was {s['rmse_heading_before'] * DEG:.3g})" if "rmse_heading_before" in s else ""),
+                f"{s['rmse_yaw_rate'] * DEG:.3g}"
+                + (f" (was {s['rmse_yaw_rate_before'] * DEG:.3g})" if "rmse_yaw_rate_before" in s else ""),
+                s["conditions"]["turning"],
+                f"{s['conditions']['mean_abs_yaw_rate_deg_s']:.2f}",
+                f"{s['conditions']['heading_deg']:.0f} ({s['conditions']['heading_sector']})",
+                f"{s['conditions']['rudder_std_deg']:.1f}",
+                f"{s['conditions']['speed']:.2f}" if "speed" in s["conditions"] else "-",
+            ]
+            for s in d.worst_segments
+        ],
+    )
     warnings = "".join(f"<li>{html.escape(w['message'])}</li>" for w in d.parameter_warnings) or "<li>none</li>"
-    figures = "".join(f'<h2>{html.escape(title)}</h2><img src="{name}" alt="{html.escape(title)}">'
-                      for name, title in images)
+    figures = "".join(
+        f'<h2>{html.escape(title)}</h2><img src="{name}" alt="{html.escape(title)}">' for name, title in images
+    )
     page = f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>ship_ident diagnosis: {html.escape(d.structure.label())}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:auto}} table{{border-collapse:collapse;font-size:13px}}
@@ -240,7 +314,7 @@ td,th{{border:1px solid #ccc;padding:2px 6px}} img{{max-width:100%}}</style></he
 <h1>Diagnosis of {html.escape(d.structure.label())}</h1>
 <p>Data: {html.escape(source)}. Fitted on {covered(d.training):.0f} s, run free on {covered(d.held_out):.0f} s
 held out ({len(d.held_out.segments)} free runs, each from the measured heading and yaw rate).
-All figures are free-run figures. Yaw-rate noise floor {d.noise['yaw_rate'] * DEG:.3g} deg/s.</p>
+All figures are free-run figures. Yaw-rate noise floor {d.noise["yaw_rate"] * DEG:.3g} deg/s.</p>
 <p><b>Verdict: {d.verdict}</b>: {html.escape(d.verdict_sentence)}</p>
 <h2>Held-out free-run measures</h2>{measures}
 <h2>Candidate effects (best first)</h2>{candidates}

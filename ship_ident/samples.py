@@ -6,6 +6,7 @@ names where each role comes from: bag topics, or the user's CSV columns. The
 bag and CSV adapter (``io``) and the ROS node produce samples; the online
 identifier consumes them.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

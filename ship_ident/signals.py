@@ -18,6 +18,7 @@ over a whole smoothing window of derivatives.
 Rows within ``edge`` samples of a segment boundary are masked out, since
 derivatives there are one-sided.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -36,16 +37,16 @@ class Signals:
     """Signals on the dataset's grid, with derivatives (SI units)."""
 
     time: np.ndarray
-    psi: np.ndarray            # rad
-    r: np.ndarray              # rad/s, smoothed, corrected for known sensor effects
-    r_dot: np.ndarray          # rad/s^2
-    r_ddot: np.ndarray         # rad/s^3
-    delta: np.ndarray          # rad
-    delta_dot: np.ndarray      # rad/s
-    r_measured: np.ndarray     # rad/s, as measured (raw)
-    heading_rate: np.ndarray   # rad/s, derivative of the smoothed heading
-    speed: np.ndarray | None   # m/s
-    mask: np.ndarray           # rows usable for the regression
+    psi: np.ndarray  # rad
+    r: np.ndarray  # rad/s, smoothed, corrected for known sensor effects
+    r_dot: np.ndarray  # rad/s^2
+    r_ddot: np.ndarray  # rad/s^3
+    delta: np.ndarray  # rad
+    delta_dot: np.ndarray  # rad/s
+    r_measured: np.ndarray  # rad/s, as measured (raw)
+    heading_rate: np.ndarray  # rad/s, derivative of the smoothed heading
+    speed: np.ndarray | None  # m/s
+    mask: np.ndarray  # rows usable for the regression
     sample_time: float
     base_column_scales: dict = field(default_factory=dict)
 
@@ -68,15 +69,12 @@ def _rts_segment(psi, r, h, heading_noise, yaw_rate_noise, jerk_psd):
     from filterpy.kalman import KalmanFilter, rts_smoother
 
     kf = KalmanFilter(dim_x=4, dim_z=2)
-    kf.F = np.array([[1, h, h * h / 2, h ** 3 / 6],
-                     [0, 1, h, h * h / 2],
-                     [0, 0, 1, h],
-                     [0, 0, 0, 1]], dtype=float)
+    kf.F = np.array([[1, h, h * h / 2, h**3 / 6], [0, 1, h, h * h / 2], [0, 0, 1, h], [0, 0, 0, 1]], dtype=float)
     kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
-    kf.R = np.diag([heading_noise ** 2, yaw_rate_noise ** 2])
+    kf.R = np.diag([heading_noise**2, yaw_rate_noise**2])
     kf.Q = Q_discrete_white_noise(dim=4, dt=h, var=jerk_psd)
     kf.x = np.array([psi[0], r[0], 0.0, 0.0])
-    kf.P = np.diag([heading_noise ** 2, yaw_rate_noise ** 2, 1e-2, 1e-2]) * 10
+    kf.P = np.diag([heading_noise**2, yaw_rate_noise**2, 1e-2, 1e-2]) * 10
     zs = np.column_stack([psi, r])
     means, covs, _, _ = kf.batch_filter(zs)
     n = len(psi)
@@ -115,8 +113,9 @@ def smoothing_window(yaw_rate_noise: float) -> float:
     return float(0.7 + 2.3 * min(1.0, yaw_rate_noise / np.radians(0.2)))
 
 
-def compute_signals(dataset: Dataset, method: str = "savgol", window_s: float | None = None,
-                    jerk_psd: float = 1e-3) -> Signals:
+def compute_signals(
+    dataset: Dataset, method: str = "savgol", window_s: float | None = None, jerk_psd: float = 1e-3
+) -> Signals:
     """Smooth and differentiate a dataset segment by segment.
 
     ``window_s`` defaults to ``smoothing_window`` of the yaw-rate noise
@@ -124,8 +123,7 @@ def compute_signals(dataset: Dataset, method: str = "savgol", window_s: float | 
     yaw-rate noise levels as its measurement noise.
     """
     if method not in DIFFERENTIATION_METHODS:
-        raise DataError(f"unknown differentiation method {method!r}; choose from "
-                        f"{', '.join(DIFFERENTIATION_METHODS)}")
+        raise DataError(f"unknown differentiation method {method!r}; choose from {', '.join(DIFFERENTIATION_METHODS)}")
     dataset.check_finite()
     h = dataset.sample_time
     n = dataset.n_samples
@@ -153,10 +151,20 @@ def compute_signals(dataset: Dataset, method: str = "savgol", window_s: float | 
         else:
             xs = _rts_segment(psi, r, h, heading_noise, yaw_rate_noise, jerk_psd)
             out["psi"][a:b], out["r"][a:b], out["r_dot"][a:b], out["r_ddot"][a:b] = xs.T
-        mask[a + edge:b - edge] = True
+        mask[a + edge : b - edge] = True
     if not mask.any():
         raise DataError(f"too few samples: every segment is shorter than {2 * edge + 3} samples")
-    return Signals(time=dataset.time, psi=out["psi"], r=out["r"], r_dot=out["r_dot"],
-                   r_ddot=out["r_ddot"], delta=out["delta"], delta_dot=out["delta_dot"],
-                   r_measured=dataset.yaw_rate, heading_rate=out["heading_rate"],
-                   speed=dataset.speed, mask=mask, sample_time=h)
+    return Signals(
+        time=dataset.time,
+        psi=out["psi"],
+        r=out["r"],
+        r_dot=out["r_dot"],
+        r_ddot=out["r_ddot"],
+        delta=out["delta"],
+        delta_dot=out["delta_dot"],
+        r_measured=dataset.yaw_rate,
+        heading_rate=out["heading_rate"],
+        speed=dataset.speed,
+        mask=mask,
+        sample_time=h,
+    )

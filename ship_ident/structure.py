@@ -13,6 +13,7 @@ Regression (continuous time, on smoothed derivatives, see signals.py):
 so w = [-T1 T2, -(T1 + T2), K, K T3, ...] and T1, T2 are the roots of
 x^2 - (T1 + T2) x + T1 T2 = 0 (T1 >= T2).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -48,7 +49,7 @@ class Regression:
     X: np.ndarray
     y: np.ndarray
     columns: list[str]
-    fixed: dict   # parameters found before the regression (e.g. gyro bias, reference speed)
+    fixed: dict  # parameters found before the regression (e.g. gyro bias, reference speed)
     signals: object
 
 
@@ -58,8 +59,11 @@ class Structure:
     def __init__(self, model: str = "nomoto2", effects=()):
         if model not in BASE_MODELS:
             raise StructureError(f"unknown model {model!r}; choose from {', '.join(BASE_MODELS)}")
-        effects = [e.strip() for e in effects if e.strip()] if not isinstance(effects, str) else \
-            [e.strip() for e in effects.split(",") if e.strip()]
+        effects = (
+            [e.strip() for e in effects if e.strip()]
+            if not isinstance(effects, str)
+            else [e.strip() for e in effects.split(",") if e.strip()]
+        )
         unknown = [e for e in effects if e not in EFFECTS]
         if unknown:
             raise StructureError(f"unknown effect {unknown[0]!r}; choose from {', '.join(EFFECTS)}")
@@ -69,7 +73,8 @@ class Structure:
         self.effect_names = tuple(effects)
         self.effects: tuple[Effect, ...] = tuple(EFFECTS[e] for e in effects)
         self.parameters: tuple[Parameter, ...] = BASE_MODELS[model] + tuple(
-            p for e in self.effects for p in e.parameters)
+            p for e in self.effects for p in e.parameters
+        )
         self.parameter_names = [p.name for p in self.parameters]
         self.fixed_names = [n for e in self.effects for n in getattr(e, "fixed", ())]
         self.free_names = [n for n in self.parameter_names if n not in self.fixed_names]
@@ -82,7 +87,7 @@ class Structure:
     def needs_speed(self) -> bool:
         return any(e.needs_speed for e in self.effects)
 
-    def with_effects(self, effects) -> "Structure":
+    def with_effects(self, effects) -> Structure:
         return Structure(self.model, list(effects))
 
     def label(self) -> str:
@@ -113,12 +118,12 @@ class Structure:
 
     def check_data(self, dataset: Dataset) -> None:
         if self.needs_speed and dataset.speed is None:
-            raise StructureError("speed_dependence needs a speed signal; record /usv/speed or "
-                                 "add a speed column")
+            raise StructureError("speed_dependence needs a speed signal; record /usv/speed or add a speed column")
 
     # --- simulation -------------------------------------------------------
-    def simulate(self, params: dict, dataset: Dataset, initial: list | None = None,
-                 substeps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def simulate(
+        self, params: dict, dataset: Dataset, initial: list | None = None, substeps: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Free-run heading (rad) and measured yaw rate (rad/s) from the measured rudder.
 
         Each segment starts from ``initial[i] = (psi0, r0, rdot0)`` (true
@@ -128,8 +133,9 @@ class Structure:
         psi, r = self.simulate_runs([params], dataset, None if initial is None else [initial], substeps)
         return psi[0], r[0]
 
-    def simulate_runs(self, param_sets: list, dataset: Dataset, initials: list | None = None,
-                      substeps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def simulate_runs(
+        self, param_sets: list, dataset: Dataset, initials: list | None = None, substeps: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """``simulate`` for several parameter sets (and initial states) at once, one compiled call
         (the runs advance side by side: far cheaper than one call each, e.g. for a Jacobian).
         Returns heading and measured yaw rate, one row per run; ``substeps`` is shared (by
@@ -142,21 +148,32 @@ class Structure:
         rudder, gain, tscale = (np.array([x[i] for x in inputs], dtype=float) for i in range(3))
         terms = [[t for e in self.effects for t in e.forcing_terms(p)] for p in param_sets]
         coef = np.array([[t.coefficient for t in ts] for ts in terms], dtype=float).reshape(len(terms), -1)
-        ints = [np.array([getattr(t, f) for t in terms[0]], dtype=np.int64)
-                for f in ("r_power", "abs_power", "harmonic", "trig")]
-        constants = np.array([[p["K"], p["T"], 0.0, 0.0] if self.order == 1 else
-                              [p["K"], p["T1"], p["T2"], p["T3"]] for p in param_sets], dtype=float)
+        ints = [
+            np.array([getattr(t, f) for t in terms[0]], dtype=np.int64)
+            for f in ("r_power", "abs_power", "harmonic", "trig")
+        ]
+        constants = np.array(
+            [
+                [p["K"], p["T"], 0.0, 0.0] if self.order == 1 else [p["K"], p["T1"], p["T2"], p["T3"]]
+                for p in param_sets
+            ],
+            dtype=float,
+        )
         bounds = np.array(dataset.segments, dtype=np.int64).reshape(-1, 2)
         if initials is None:
-            initials = [[(dataset.heading[a], dataset.yaw_rate[a] - self.yaw_rate_bias(p), 0.0)
-                         for a, _ in dataset.segments] for p in param_sets]
+            initials = [
+                [(dataset.heading[a], dataset.yaw_rate[a] - self.yaw_rate_bias(p), 0.0) for a, _ in dataset.segments]
+                for p in param_sets
+            ]
         initial = np.array(initials, dtype=float).reshape(len(param_sets), len(bounds), 3)
-        psi_out, r_out = simulate_kernel(self.order, h, rudder, gain, tscale, constants, bounds, initial,
-                                         coef, *ints, substeps)
+        psi_out, r_out = simulate_kernel(
+            self.order, h, rudder, gain, tscale, constants, bounds, initial, coef, *ints, substeps
+        )
         return psi_out, np.array([self.measured_yaw_rate(r, p) for r, p in zip(r_out, param_sets)])
 
-    def effective_inputs(self, params: dict, time: np.ndarray, rudder: np.ndarray,
-                         speed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def effective_inputs(
+        self, params: dict, time: np.ndarray, rudder: np.ndarray, speed: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The rudder angle acting on the hull (rad) and the per-sample multipliers of K and of
         the time constants, after every effect's rudder and speed hooks."""
         for effect in self.effects:
@@ -190,8 +207,12 @@ class Structure:
         if self.order == 1:
             cols = {"r'": s.r_dot * scale_t, "delta": s.delta * scale_k}
         else:
-            cols = {"r''": s.r_ddot * scale_t ** 2, "r'": s.r_dot * scale_t,
-                    "delta": s.delta * scale_k, "delta'": s.delta_dot}
+            cols = {
+                "r''": s.r_ddot * scale_t**2,
+                "r'": s.r_dot * scale_t,
+                "delta": s.delta * scale_k,
+                "delta'": s.delta_dot,
+            }
         for effect in self.effects:
             cols.update(effect.regressors(s))
         rows = s.rows

@@ -1,4 +1,5 @@
 """Shared fixtures: the ``ship-ident`` command as a subprocess and a noise-free simulation."""
+
 import os
 import subprocess
 import sys
@@ -14,9 +15,17 @@ SHIP_IDENT = Path(sys.executable).parent / "ship-ident"
 @pytest.fixture(scope="session")
 def ship_ident_cli():
     """``run(*args)``: ``ship-ident ARGS`` as a subprocess with a copy of os.environ (ROS_ON_PIP.md)."""
+
     def run(*args, cwd=None) -> subprocess.CompletedProcess:
-        return subprocess.run([str(SHIP_IDENT), *map(str, args)], capture_output=True, text=True,
-                              cwd=cwd, env=dict(os.environ), timeout=300)
+        return subprocess.run(
+            [str(SHIP_IDENT), *map(str, args)],
+            capture_output=True,
+            text=True,
+            cwd=cwd,
+            env=dict(os.environ),
+            timeout=300,
+        )
+
     return run
 
 

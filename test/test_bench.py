@@ -1,4 +1,5 @@
 """Smoke runs of every benchmark at tiny sizes (``--quick``), asserting sane numbers."""
+
 import json
 
 import numpy as np
@@ -37,10 +38,10 @@ def test_efficiency_quick_gives_bounded_errors_and_coverages():
     for maneuver in result["maneuvers"].values():
         for method, summary in maneuver["methods"].items():
             for q in parameters:
-                coverage = summary[q]["coverage_95"]           # a KeyError is a failure, not 0.0
+                coverage = summary[q]["coverage_95"]  # a KeyError is a failure, not 0.0
                 assert coverage * seeds == pytest.approx(round(coverage * seeds)), (method, q)
                 assert 0.0 <= coverage <= 1.0
-            assert "coverage_95" not in summary["T1+T2-T3"]    # no standard error: no claim
+            assert "coverage_95" not in summary["T1+T2-T3"]  # no standard error: no claim
         default = maneuver["methods"][DEFAULT_METHOD]
         assert all(default[q]["coverage_95"] == 1.0 for q in parameters), default
         oe = maneuver["methods"]["rwlssvm+oe"]

@@ -1,4 +1,5 @@
 """``ship-ident simulate | identify | compare`` end to end, on real files, as a user runs them."""
+
 import contextlib
 import io
 import json
@@ -72,7 +73,8 @@ def test_identify_gives_the_same_numbers_for_every_format(ols_records):
         for name, value in reference["parameters"].items():
             assert ols_records[fmt]["parameters"][name] == pytest.approx(value, rel=1e-9), (fmt, name)
         assert ols_records[fmt]["fit"]["rmse_heading"] == pytest.approx(
-            reference["fit"]["rmse_heading"], rel=1e-6, abs=1e-12)
+            reference["fit"]["rmse_heading"], rel=1e-6, abs=1e-12
+        )
 
 
 def test_identify_json_follows_the_contract(ols_records):
@@ -85,8 +87,17 @@ def test_identify_json_follows_the_contract(ols_records):
 
 def test_identify_json_as_subprocess_prints_only_json(clean_files, ship_ident_cli, tmp_path):
     paths, _ = clean_files
-    result = ship_ident_cli("identify", paths["csv"], "--method", "ols", "--effects", "rudder_offset",
-                            "--json", "--save", tmp_path / "model.json")
+    result = ship_ident_cli(
+        "identify",
+        paths["csv"],
+        "--method",
+        "ols",
+        "--effects",
+        "rudder_offset",
+        "--json",
+        "--save",
+        tmp_path / "model.json",
+    )
     assert result.returncode == 0, result.stderr
     record = json.loads(result.stdout)
     assert record["structure"] == {"model": "nomoto2", "effects": ["rudder_offset"]}
@@ -106,8 +117,12 @@ def test_compare_runs_a_saved_model_free_on_other_data(clean_files, tmp_path):
     model = tmp_path / "model.json"
     assert run_main("identify", paths["rosbag2"], "--method", "ols", "--save", model)[0] == 0
     other = tmp_path / "turning.csv"
-    assert run_main("simulate", "--maneuver", "turning", "--effects", "", "--noise", "0",
-                    "--duration", "200", "--out", other)[0] == 0
+    assert (
+        run_main(
+            "simulate", "--maneuver", "turning", "--effects", "", "--noise", "0", "--duration", "200", "--out", other
+        )[0]
+        == 0
+    )
     code, out = run_main("compare", model, other, "--json")
     assert code == 0
     record = json.loads(out)
@@ -128,6 +143,7 @@ def test_bundled_demo_bag_matches_its_truth_file():
 
 
 # --- bad input: exit 2, one line on stderr, nothing on stdout, no traceback ------------------
+
 
 def assert_one_line_error(result, words):
     assert result.returncode == 2, (result.returncode, result.stderr)
@@ -167,18 +183,36 @@ def test_bad_arguments_exit_2_with_one_line(tmp_path, clean_files, ship_ident_cl
 
 # --- several recordings, CSV columns by name -------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def short_runs(tmp_path_factory):
     """60-200 s manoeuvres of one plain nomoto2 vessel: a noisy zigzag (bag) and turning circle
     (CSV at 0.2 s), and a random-rudder run with realistic noise (CSV) to judge on (judged on
     noise-free data, the scatter of a 120 s fit at 3x noise is itself structure above the floor)."""
     folder = tmp_path_factory.mktemp("recordings")
-    runs = {"zigzag": ("zigzag10", "60", "0.1", "3", folder / "zigzag.mcap"),
-            "turning": ("turning", "60", "0.2", "3", folder / "turning.csv"),
-            "random": ("random", "200", "0.1", "1", folder / "random.csv")}
+    runs = {
+        "zigzag": ("zigzag10", "60", "0.1", "3", folder / "zigzag.mcap"),
+        "turning": ("turning", "60", "0.2", "3", folder / "turning.csv"),
+        "random": ("random", "200", "0.1", "1", folder / "random.csv"),
+    }
     for seed, (maneuver, duration, step, noise, path) in enumerate(runs.values(), start=11):
-        code, _ = run_main("simulate", "--maneuver", maneuver, "--effects", "", "--noise", noise,
-                           "--duration", duration, "--sample-time", step, "--seed", seed, "--out", path)
+        code, _ = run_main(
+            "simulate",
+            "--maneuver",
+            maneuver,
+            "--effects",
+            "",
+            "--noise",
+            noise,
+            "--duration",
+            duration,
+            "--sample-time",
+            step,
+            "--seed",
+            seed,
+            "--out",
+            path,
+        )
         assert code == 0
     return {name: run[-1] for name, run in runs.items()}
 
@@ -191,8 +225,10 @@ def test_identify_fits_several_recordings_as_one(short_runs):
     assert code == 0
     record = json.loads(out)
     assert record["data"] == [str(p) for p in data] and record["samples"] == 1202
-    assert record["recordings"] == [{"name": str(data[0]), "start": 0, "stop": 601},
-                                    {"name": str(data[1]), "start": 601, "stop": 1202}]  # 0.2 s read at 0.1 s
+    assert record["recordings"] == [
+        {"name": str(data[0]), "start": 0, "stop": 601},
+        {"name": str(data[1]), "start": 601, "stop": 1202},
+    ]  # 0.2 s read at 0.1 s
 
 
 def test_joint_fit_of_two_recordings_beats_either_alone():
@@ -223,13 +259,23 @@ def test_compare_and_diagnose_take_several_recordings(short_runs, tmp_path):
     record = json.loads(out)
     assert [r["name"] for r in record["recordings"]] == [str(short_runs["random"]), str(short_runs["turning"])]
     assert record["samples"] == 2001 + 601 and record["fit"]["r_yaw_rate"] > 0.9
-    code, out = run_main("diagnose", short_runs["zigzag"], short_runs["turning"], "--validate", short_runs["random"],
-                         "--validate", short_runs["zigzag"], "--workers", "1", "--json")
+    code, out = run_main(
+        "diagnose",
+        short_runs["zigzag"],
+        short_runs["turning"],
+        "--validate",
+        short_runs["random"],
+        "--validate",
+        short_runs["zigzag"],
+        "--workers",
+        "1",
+        "--json",
+    )
     assert code == 0
     record = json.loads(out)
     assert record["data"] == [str(short_runs["zigzag"]), str(short_runs["turning"])]
     assert record["validate"] == [str(short_runs["random"]), str(short_runs["zigzag"])]
-    assert record["verdict"] == "adequate"          # the truth is the plain model: nothing is missing
+    assert record["verdict"] == "adequate"  # the truth is the plain model: nothing is missing
     assert not any(c["significant"] for c in record["candidates"])
 
 
@@ -242,15 +288,23 @@ def test_columns_by_name_and_synonyms_on_the_command_line(clean_files, ship_iden
     public.write_text("\n".join(["time,delta,psi,r,surge_speed"] + lines[1:]) + "\n")
     result = ship_ident_cli("identify", public, "--method", "ols", "--json")
     assert result.returncode == 0, result.stderr
-    assert result.stderr.strip() == (f"ship-ident identify: {public}: reading columns "
-                                     "t=time,rudder=delta,heading=psi,yaw_rate=r,speed=surge_speed")
+    assert result.stderr.strip() == (
+        f"ship-ident identify: {public}: reading columns t=time,rudder=delta,heading=psi,yaw_rate=r,speed=surge_speed"
+    )
     assert json.loads(result.stdout)["samples"] == 3001
     canonical = ship_ident_cli("identify", paths["csv"], "--method", "ols", "--json")
-    assert canonical.returncode == 0 and canonical.stderr == ""       # canonical names: nothing said
+    assert canonical.returncode == 0 and canonical.stderr == ""  # canonical names: nothing said
     own = tmp_path / "own.csv"
     own.write_text("\n".join(["clock,helm,compass,gyro,log"] + lines[1:]) + "\n")
-    code, out = run_main("identify", own, "--method", "ols", "--json",
-                         "--columns", "t=clock,rudder=helm,heading=compass,yaw_rate=gyro,speed=log")
+    code, out = run_main(
+        "identify",
+        own,
+        "--method",
+        "ols",
+        "--json",
+        "--columns",
+        "t=clock,rudder=helm,heading=compass,yaw_rate=gyro,speed=log",
+    )
     assert code == 0 and json.loads(out)["parameters"] == json.loads(canonical.stdout)["parameters"]
     for command, args, words in [
         ("identify", (own, "--columns", "rudder=rudder_cmd"), "has no column 'rudder_cmd'"),

@@ -1,4 +1,5 @@
 """The package builds with colcon into a ROS 2 install space whose executables start."""
+
 import json
 import os
 import shutil
@@ -10,8 +11,9 @@ import pytest
 
 PACKAGE_ROOT = Path(__file__).parents[1]
 VENV_BIN = Path(sys.executable).parent
-NOT_SOURCES = shutil.ignore_patterns(".venv", ".git", "build", "install", "log", "__pycache__",
-                                     "*.egg-info", ".pytest_cache", "out")
+NOT_SOURCES = shutil.ignore_patterns(
+    ".venv", ".git", "build", "install", "log", "__pycache__", "*.egg-info", ".pytest_cache", "out"
+)
 
 pytestmark = pytest.mark.slow
 
@@ -22,18 +24,26 @@ def workspace(tmp_path_factory):
     root = tmp_path_factory.mktemp("ws")
     shutil.copytree(PACKAGE_ROOT, root / "src" / "ship_ident", ignore=NOT_SOURCES)
     env = dict(os.environ, PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
-    result = subprocess.run(["colcon", "build", "--base-paths", "src"], cwd=root, env=env,
-                            capture_output=True, text=True, timeout=300)
+    result = subprocess.run(
+        ["colcon", "build", "--base-paths", "src"], cwd=root, env=env, capture_output=True, text=True, timeout=300
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     return root
 
 
 def run_sourced(workspace: Path, command: str) -> subprocess.CompletedProcess:
     """Run ``command`` in bash after sourcing the install space (as ``ros2 run`` would see it)."""
-    env = dict(os.environ, AMENT_PREFIX_PATH=str(VENV_BIN.parent),
-               PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
-    return subprocess.run(["bash", "-c", f"source install/setup.bash && {command}"], cwd=workspace,
-                          env=env, capture_output=True, text=True, timeout=120)
+    env = dict(
+        os.environ, AMENT_PREFIX_PATH=str(VENV_BIN.parent), PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}"
+    )
+    return subprocess.run(
+        ["bash", "-c", f"source install/setup.bash && {command}"],
+        cwd=workspace,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_colcon_installs_executables_and_ament_marker(workspace):
@@ -59,13 +69,19 @@ def test_built_identifier_node_with_the_params_file_starts_and_identifies(worksp
     from ship_ident.demo import Listener, ros_environment, shut_down, start_play
 
     domain = 101  # outside the 1..100 range the other node tests draw from
-    env = dict(ros_environment(domain, tmp_path), AMENT_PREFIX_PATH=str(VENV_BIN.parent),
-               PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
+    env = dict(
+        ros_environment(domain, tmp_path),
+        AMENT_PREFIX_PATH=str(VENV_BIN.parent),
+        PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}",
+    )
     share = workspace / "install" / "ship_ident" / "share" / "ship_ident"
-    command = (f"source install/setup.bash && exec install/ship_ident/lib/ship_ident/identifier_node "
-               f"--ros-args --params-file {share / 'config' / 'ship_ident.yaml'} -p use_sim_time:=true")
-    node = subprocess.Popen(["bash", "-c", command], cwd=workspace, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+    command = (
+        f"source install/setup.bash && exec install/ship_ident/lib/ship_ident/identifier_node "
+        f"--ros-args --params-file {share / 'config' / 'ship_ident.yaml'} -p use_sim_time:=true"
+    )
+    node = subprocess.Popen(
+        ["bash", "-c", command], cwd=workspace, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
     listener = Listener(domain)
     play = start_play(env, share / "bags" / "demo_seed001.mcap", 20.0, stderr=subprocess.PIPE, text=True)
     try:

@@ -1,4 +1,5 @@
 """The numeric core against exact solutions: integrator, resampling, structure."""
+
 from dataclasses import replace
 
 import numpy as np
@@ -46,8 +47,9 @@ def test_runs_side_by_side_equal_one_run_per_segment():
     shots = replace(data, segments=((0, 300), (300, 700), (700, 701), (701, data.n_samples)))
     truth = {n: sim.truth[n] for n in structure.parameter_names}
     runs = [truth, dict(truth, K=0.8, T2=0.3, alpha=-0.5), dict(truth, alpha=-3000.0)]
-    initials = [[(data.heading[a], data.yaw_rate[a] + 0.01 * k, 0.002 * k) for a, _ in shots.segments]
-                for k in range(len(runs))]
+    initials = [
+        [(data.heading[a], data.yaw_rate[a] + 0.01 * k, 0.002 * k) for a, _ in shots.segments] for k in range(len(runs))
+    ]
     psi, r = structure.simulate_runs(runs, shots, initials, substeps=3)
     for params, initial, psi_run, r_run in zip(runs, initials, psi, r):
         for (a, b), state in zip(shots.segments, initial):
@@ -96,7 +98,7 @@ def test_resample_splits_gaps_sorts_and_unwraps():
     assert len(ds.segments) == 2
     assert len(ds.gaps) == 1 and ds.gaps[0][0] == pytest.approx(39.95) and ds.gaps[0][1] == pytest.approx(50.05)
     assert not np.any((ds.time > 40) & (ds.time < 50))
-    assert np.allclose(np.diff(ds.heading[ds.segments[0][0]:ds.segments[0][1]]), 0.02, atol=1e-9)
+    assert np.allclose(np.diff(ds.heading[ds.segments[0][0] : ds.segments[0][1]]), 0.02, atol=1e-9)
     assert np.allclose(ds.rudder, np.sin(ds.time), atol=2e-3)
 
 
@@ -119,8 +121,9 @@ def test_structure_rejects_unknown_names_and_lists_parameters():
 
 
 def test_parameter_change_midway_keeps_motion_continuous():
-    sim = simulate("random", "seed001", duration=200, noise=0.0, seed=4,
-                   change=(100.0, {"K": 0.5883 * 0.7, "T1": 1.4397 * 1.3}))
+    sim = simulate(
+        "random", "seed001", duration=200, noise=0.0, seed=4, change=(100.0, {"K": 0.5883 * 0.7, "T1": 1.4397 * 1.3})
+    )
     r = sim.true_yaw_rate
     i = 1000
     assert abs(r[i + 1] - r[i]) < 5 * np.median(np.abs(np.diff(r))) + 1e-3
@@ -131,5 +134,5 @@ def test_parameter_change_midway_keeps_motion_continuous():
     new = simulate("random", "seed001", duration=200, noise=0.0, seed=4, parameters=sim.info["truth_after"])
     assert np.allclose(r[:i], held.true_yaw_rate[:i])
     settled = slice(i + 200, None)
-    assert np.max(np.abs(r[settled] - new.true_yaw_rate[settled])) < 1e-4   # rad/s
-    assert np.max(np.abs(r[settled] - held.true_yaw_rate[settled])) > 0.01   # rad/s: the gain fell 30 %
+    assert np.max(np.abs(r[settled] - new.true_yaw_rate[settled])) < 1e-4  # rad/s
+    assert np.max(np.abs(r[settled] - held.true_yaw_rate[settled])) > 0.01  # rad/s: the gain fell 30 %

@@ -1,5 +1,6 @@
 """Dependencies point the right way: the numeric core imports without ROS or bag libraries, and no
 module of the package imports itself through others (no cycles)."""
+
 import ast
 import subprocess
 import sys
@@ -35,28 +36,54 @@ def package_modules() -> list[str]:
 
 
 def core_modules() -> list[str]:
-    return [name for name in package_modules()
-            if not any(name == door or name.startswith(door + ".") for door in DOORS)]
+    return [
+        name for name in package_modules() if not any(name == door or name.startswith(door + ".") for door in DOORS)
+    ]
 
 
 def test_the_core_is_every_module_but_the_doors():
     core = set(core_modules())
-    assert {"dataset", "signals", "structure", "effects", "integrate", "estimators", "simulator", "metrics",
-            "innovations", "change", "diagnose", "online", "report", "samples", "threedof"} <= core
+    assert {
+        "dataset",
+        "signals",
+        "structure",
+        "effects",
+        "integrate",
+        "estimators",
+        "simulator",
+        "metrics",
+        "innovations",
+        "change",
+        "diagnose",
+        "online",
+        "report",
+        "samples",
+        "threedof",
+    } <= core
     assert not core & {"node", "io", "cli", "fleet", "commands.replay", "bench.peers"}
 
 
 def test_core_imports_with_ros_and_bag_libraries_blocked():
     imports = "".join(f"import ship_ident.{name}\n" for name in core_modules())
     check = f"for name in {BLOCKED!r}:\n    assert name not in sys.modules, name\n"
-    process = subprocess.run([sys.executable, "-c", BLOCKER + imports + check], capture_output=True, text=True,
-                             cwd=PACKAGE.parent, timeout=120)
+    process = subprocess.run(
+        [sys.executable, "-c", BLOCKER + imports + check],
+        capture_output=True,
+        text=True,
+        cwd=PACKAGE.parent,
+        timeout=120,
+    )
     assert process.returncode == 0, process.stderr.strip().splitlines()[-1:]
 
 
 def test_the_blocker_blocks():
-    process = subprocess.run([sys.executable, "-c", BLOCKER + "import ship_ident.io\n"], capture_output=True,
-                             text=True, cwd=PACKAGE.parent, timeout=120)
+    process = subprocess.run(
+        [sys.executable, "-c", BLOCKER + "import ship_ident.io\n"],
+        capture_output=True,
+        text=True,
+        cwd=PACKAGE.parent,
+        timeout=120,
+    )
     assert process.returncode != 0 and "rosbags is blocked" in process.stderr
 
 
@@ -73,13 +100,13 @@ def imported_modules(name: str) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 parts = name.split(".") if name else []
-                base = parts[:len(parts) - node.level + is_package] if node.level - is_package else parts
+                base = parts[: len(parts) - node.level + is_package] if node.level - is_package else parts
                 stem = ".".join(base + (node.module.split(".") if node.module else []))
             else:
                 stem = node.module or ""
                 if not (stem == "ship_ident" or stem.startswith("ship_ident.")):
                     continue
-                stem = stem[len("ship_ident."):] if stem != "ship_ident" else ""
+                stem = stem[len("ship_ident.") :] if stem != "ship_ident" else ""
             candidates = [f"{stem}.{alias.name}" if stem else alias.name for alias in node.names]
             targets = ["ship_ident" + ("." + stem if stem else "")]
             targets += ["ship_ident." + c for c in candidates if c in modules]
@@ -87,7 +114,7 @@ def imported_modules(name: str) -> set[str]:
             continue
         for target in targets:
             if target == "ship_ident" or target.startswith("ship_ident."):
-                found.add(target[len("ship_ident."):] if target != "ship_ident" else "")
+                found.add(target[len("ship_ident.") :] if target != "ship_ident" else "")
     found.discard(name)
     return found
 
@@ -101,7 +128,7 @@ def import_cycle(graph: dict[str, set[str]]) -> list[str]:
         stack.append(node)
         for nxt in sorted(graph.get(node, ())):
             if state.get(nxt) == "open":
-                return stack[stack.index(nxt):] + [nxt]
+                return stack[stack.index(nxt) :] + [nxt]
             if nxt not in state and (cycle := visit(nxt)):
                 return cycle
         state[node] = "done"

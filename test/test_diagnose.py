@@ -1,7 +1,8 @@
 """Diagnosis on simulated data with known truth: the hidden effect is found, and adding it helps."""
+
 import json
-from dataclasses import replace
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,14 +21,17 @@ DURATION = 600.0  # s at 10 Hz: 390 s to fit, 210 s held out
 
 # seed001's cubic damping (alpha = -0.12) is invisible at its turn rates; a stronger one is used
 HIDDEN = {
-    "rudder_offset": {}, "cubic_yaw": {"alpha": 3.0}, "rudder_delay": {}, "wind_yaw": {},
-    "gyro_bias": {}, "speed_dependence": {},
+    "rudder_offset": {},
+    "cubic_yaw": {"alpha": 3.0},
+    "rudder_delay": {},
+    "wind_yaw": {},
+    "gyro_bias": {},
+    "speed_dependence": {},
 }
 
 
 def _data(effects, parameters=None, seed=1):
-    return simulate("random", "seed001", effects=effects, duration=DURATION, seed=seed,
-                    parameters=parameters).dataset
+    return simulate("random", "seed001", effects=effects, duration=DURATION, seed=seed, parameters=parameters).dataset
 
 
 @pytest.mark.parametrize("effect", HIDDEN)
@@ -35,11 +39,13 @@ def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
     dataset = _data((effect,), HIDDEN[effect])
     result = diagnose(dataset, "nomoto2", (), workers=1)
     top = result.candidates[0]
-    figures = {c.effect: (round(c.improvement_heading, 2), round(c.improvement_yaw_rate, 2), c.significant)
-               for c in result.candidates}
+    figures = {
+        c.effect: (round(c.improvement_heading, 2), round(c.improvement_yaw_rate, 2), c.significant)
+        for c in result.candidates
+    }
     print(effect, figures, [round(c.training_gain, 4) for c in result.candidates])
     assert result.verdict == "missing_effect", figures
-    assert top.training_gain >= 0.02   # it also shows in free runs on the data it was fitted on
+    assert top.training_gain >= 0.02  # it also shows in free runs on the data it was fitted on
     assert top.effect == effect and top.significant, figures
     key = "improvement_yaw_rate" if effect == "gyro_bias" else "improvement_heading"
     assert getattr(top, key) >= 0.5, figures
@@ -78,8 +84,13 @@ def test_cli_json_follows_the_contract(tmp_path, capsys):
     sim = simulate("random", "seed001", effects=("gyro_bias",), duration=DURATION, seed=2)
     path = tmp_path / "run.csv"
     d = sim.dataset
-    np.savetxt(path, np.column_stack([d.time, d.rudder, d.heading, d.yaw_rate, d.speed]), delimiter=",",
-               header="t,rudder,heading,yaw_rate,speed", comments="")
+    np.savetxt(
+        path,
+        np.column_stack([d.time, d.rudder, d.heading, d.yaw_rate, d.speed]),
+        delimiter=",",
+        header="t,rudder,heading,yaw_rate,speed",
+        comments="",
+    )
     assert cli.main(["diagnose", str(path), "--model", "nomoto2", "--json", "--workers", "2"]) == 0
     captured = capsys.readouterr()
     record = json.loads(captured.out)
@@ -88,8 +99,7 @@ def test_cli_json_follows_the_contract(tmp_path, capsys):
     assert record["fit"]["horizon"] == "free-run"
     top = record["candidates"][0]
     assert top["effect"] == "gyro_bias"
-    assert {"effect", "improvement", "significant", "rmse_heading_after", "rmse_yaw_rate_after",
-            "evidence"} <= set(top)
+    assert {"effect", "improvement", "significant", "rmse_heading_after", "rmse_yaw_rate_after", "evidence"} <= set(top)
     assert "diagnose [" in captured.err  # progress on stderr
 
 
@@ -105,8 +115,7 @@ def test_docs_added_effect_example_runs():
         exec(compile(code, "docs/diagnose.md", "exec"), {})
         assert "gyro_scale" in EFFECTS
         truth = {"g_s": 0.1}
-        sim = simulate("random", "seed001", effects=("gyro_scale",), duration=DURATION, seed=3,
-                       parameters=truth)
+        sim = simulate("random", "seed001", effects=("gyro_scale",), duration=DURATION, seed=3, parameters=truth)
         result = diagnose(sim.dataset, "nomoto2", (), workers=1)  # exec'd classes do not pickle
         assert result.candidates[0].effect == "gyro_scale"
         assert result.candidates[0].significant
@@ -115,8 +124,11 @@ def test_docs_added_effect_example_runs():
         EFFECTS.pop("gyro_scale", None)
 
 
-@pytest.mark.skipif(not KVLCC2.is_dir(), reason=f"KVLCC2 data not found at {KVLCC2} (../shared/data/"
-                    "kvlcc2_marin: measured MARIN model tests, not shipped with the package)")
+@pytest.mark.skipif(
+    not KVLCC2.is_dir(),
+    reason=f"KVLCC2 data not found at {KVLCC2} (../shared/data/"
+    "kvlcc2_marin: measured MARIN model tests, not shipped with the package)",
+)
 def test_kvlcc2_walk_through(tmp_path, capsys):
     """docs/diagnose.md's walk-through on measured data: nomoto1 fitted on the 10/10 zigzag and run
     free on both 20/20 zigzags misses cubic_yaw; adding it cuts the 20/20 error by two thirds."""
@@ -126,34 +138,57 @@ def test_kvlcc2_walk_through(tmp_path, capsys):
         return str(KVLCC2 / f"MARIN_FREE_KVLCC2_{name}_m.csv")
 
     report = tmp_path / "report"
-    assert cli.main(["diagnose", path("zz_10"), "--model", "nomoto1", "--sample-time", "1", "--workers", "2",
-                     "--validate", path("zz_20"), "--validate", path("zz_-20"), "--json",
-                     "--report", str(report)]) == 0
+    assert (
+        cli.main(
+            [
+                "diagnose",
+                path("zz_10"),
+                "--model",
+                "nomoto1",
+                "--sample-time",
+                "1",
+                "--workers",
+                "2",
+                "--validate",
+                path("zz_20"),
+                "--validate",
+                path("zz_-20"),
+                "--json",
+                "--report",
+                str(report),
+            ]
+        )
+        == 0
+    )
     record = json.loads(capsys.readouterr().out)
     top = record["candidates"][0]
-    print("KVLCC2 round 1:", {c["effect"]: (round(c["improvement_yaw_rate"], 3), round(c["t_statistic"], 1))
-                              for c in record["candidates"]})
+    print(
+        "KVLCC2 round 1:",
+        {c["effect"]: (round(c["improvement_yaw_rate"], 3), round(c["t_statistic"], 1)) for c in record["candidates"]},
+    )
     assert record["verdict"] == "missing_effect" and record["diagnosis"]["held_out"]["windows"] == 6
-    assert top["effect"] == "course_instability" and top["significant"]   # measured: 72 %, t 3.2
+    assert top["effect"] == "course_instability" and top["significant"]  # measured: 72 %, t 3.2
     assert top["improvement_yaw_rate"] > 0.65 and top["t_statistic"] >= 3.0
     significant = {c["effect"] for c in record["candidates"] if c["significant"]}
-    assert {"course_instability", "cubic_yaw"} <= significant <= {"course_instability", "cubic_yaw",
-                                                                  "quadratic_yaw"}   # all yaw damping
+    assert (
+        {"course_instability", "cubic_yaw"} <= significant <= {"course_instability", "cubic_yaw", "quadratic_yaw"}
+    )  # all yaw damping
     assert (report / "index.html").is_file() and (report / "measured_vs_model.png").is_file()
 
     zz10, zz20 = (load_dataset(path(name), sample_time=1.0) for name in ("zz_10", "zz_20"))
-    alone = diagnose(zz10, "nomoto1", (), workers=2, validation=zz20)   # one 20/20 zigzag: four turns
+    alone = diagnose(zz10, "nomoto1", (), workers=2, validation=zz20)  # one 20/20 zigzag: four turns
     print("KVLCC2 zz_20 alone:", [(c.effect, round(c.t_statistic, 1)) for c in alone.candidates[:2]])
     assert alone.candidates[0].effect in ("course_instability", "cubic_yaw")
     assert alone.candidates[0].improvement_yaw_rate > 0.6
 
     second = diagnose(zz10, "nomoto1", ("cubic_yaw",), workers=2, validation=zz20)
     before, after = (np.degrees(run.fit["rmse_heading"]) for run in (second.before_run, second.run))
-    print(f"KVLCC2 zz_20 heading RMSE: nomoto1 {before:.2f} deg, +cubic_yaw {after:.2f} deg",
-          second.estimate.parameters)
-    assert before > 12.0 and after < 6.0                               # measured: 14.0 -> 4.9 deg
+    print(
+        f"KVLCC2 zz_20 heading RMSE: nomoto1 {before:.2f} deg, +cubic_yaw {after:.2f} deg", second.estimate.parameters
+    )
+    assert before > 12.0 and after < 6.0  # measured: 14.0 -> 4.9 deg
     p = second.estimate.parameters
-    assert p["K"] > 0 and 0 < p["T"] <= 1e3 and p["alpha"] > 0          # within the physical bounds
+    assert p["K"] > 0 and 0 < p["T"] <= 1e3 and p["alpha"] > 0  # within the physical bounds
     # T pinned at its bound: never adequate; course_instability frees it
     assert second.verdict != "adequate" and second.pinned[0]["freed_by"] == "course_instability"
     print("KVLCC2 round 2:", second.verdict, second.verdict_sentence)
@@ -174,13 +209,14 @@ def test_speed_exponents_follow_the_physics_on_a_narrow_speed_range():
     """K ~ U and T ~ 1/U held (n_K = n_T = 1) when the training speed hardly varies; fitted, within
     their bounds [0, 2], when it spans 60-120 % of the nominal speed."""
     from ship_ident.diagnose import physical_speed_law
+
     structure = Structure("nomoto2", ("speed_dependence",))
     varying = simulate("random", "seed001", effects=("speed_dependence",), duration=DURATION, seed=4).dataset
     steady = replace(varying, speed=np.full(varying.n_samples, 2.0) + 0.01 * np.sin(varying.time))
     assert {"n_K", "n_T"} <= set(physical_speed_law(structure, varying).free_names)
     held = physical_speed_law(structure, steady)
     assert "n_K" in held.fixed_names and "n_T" not in held.free_names
-    assert "n_K" in structure.free_names                       # the caller's structure is untouched
+    assert "n_K" in structure.free_names  # the caller's structure is untouched
     estimate = _fit(structure, steady, "rlssvm+oe", {"K": 0.5, "T1": 1.4, "T2": 0.1, "T3": 0.05})
     assert estimate.parameters["n_K"] == 1.0 and estimate.parameters["n_T"] == 1.0
 
@@ -195,9 +231,12 @@ def test_extrapolation_names_what_the_fit_never_saw():
     assert extrapolation(zigzag, zigzag) is None
 
 
-R0 = 0.5883 * np.radians(20.0)   # seed001's turn rate at 20 deg of rudder (rad/s)
-NEW_EFFECTS = {"course_instability": {"n1": -0.3, "n3": 0.3 / (0.4 * R0) ** 2},   # holds a turn at 0.4 R0
-               "quadratic_yaw": {"d_q": 0.8 / R0}, "rudder_stall": {"c_stall": 0.8}}
+R0 = 0.5883 * np.radians(20.0)  # seed001's turn rate at 20 deg of rudder (rad/s)
+NEW_EFFECTS = {
+    "course_instability": {"n1": -0.3, "n3": 0.3 / (0.4 * R0) ** 2},  # holds a turn at 0.4 R0
+    "quadratic_yaw": {"d_q": 0.8 / R0},
+    "rudder_stall": {"c_stall": 0.8},
+}
 
 
 @pytest.mark.parametrize("effect", NEW_EFFECTS)
@@ -208,8 +247,11 @@ def test_effects_real_hulls_need_are_named_first_with_their_parameters(effect):
     truth = NEW_EFFECTS[effect]
     result = diagnose(_data((effect,), truth), "nomoto2", (), workers=1)
     top = result.candidates[0]
-    print(effect, [(c.effect, round(c.improvement_yaw_rate, 2), c.significant) for c in result.candidates[:3]],
-          top.estimate.parameters)
+    print(
+        effect,
+        [(c.effect, round(c.improvement_yaw_rate, 2), c.significant) for c in result.candidates[:3]],
+        top.estimate.parameters,
+    )
     assert top.effect == effect and top.improvement > 0.5
     name = next(iter(truth))
     assert top.estimate.parameters[name] == pytest.approx(truth[name], rel=0.3)

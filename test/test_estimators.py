@@ -1,12 +1,12 @@
 """Every estimator against known truth on simulated data, and the LS-SVM identities."""
+
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from ship_ident.estimators import make_estimator, method_names
-from ship_ident.estimators.lssvm import (lssvm_dual_bias_free, lssvm_dual_with_bias, lssvm_primal_with_bias,
-                                         ridge_primal)
+from ship_ident.estimators.lssvm import lssvm_dual_bias_free, lssvm_dual_with_bias, lssvm_primal_with_bias, ridge_primal
 from ship_ident.simulator import simulate
 from ship_ident.structure import Structure
 
@@ -34,7 +34,7 @@ def test_regressions_recover_gain_and_time_constant_noise_free(clean, method):
     est = make_estimator(method).fit(clean.structure, clean.dataset)
     t = clean.truth
     assert rel(est, t, "K") < 0.01 and rel(est, t, "T1") < 0.02
-    if method == "lssvm":   # the bias swallows the offset's constant column: delta_r is lost (-100 %)
+    if method == "lssvm":  # the bias swallows the offset's constant column: delta_r is lost (-100 %)
         assert est.parameters["delta_r"] == 0.0
     else:
         assert rel(est, t, "delta_r") < 0.01

@@ -1,4 +1,5 @@
 """Fleet replay: many bags of two vessels, --jobs 2 and a local Dask cluster give the same table."""
+
 import argparse
 import csv
 
@@ -22,8 +23,9 @@ def bags(tmp_path_factory):
         (root / vessel).mkdir()
         for trip in range(2):
             path = root / vessel / f"trip{trip}.mcap"
-            write_simulation(simulate("mixed", duration=200.0, seed=10 * trip + len(paths),
-                                      parameters={"K": k}), path, "mcap")
+            write_simulation(
+                simulate("mixed", duration=200.0, seed=10 * trip + len(paths), parameters={"K": k}), path, "mcap"
+            )
             paths.append(str(path))
     return paths
 
@@ -86,8 +88,7 @@ def test_local_dask_cluster_gives_the_same_rows(pool_rows, bags, tmp_path, capsy
     table = tmp_path / "dask.csv"
     assert replay_fleet(fleet_args(bags, "--dask", "local", "--jobs", "2", "--table", str(table)), bags) == 0
     rows = read_table(table)
-    assert [(r["vessel"], r["bag"], r["time"]) for r in rows] == \
-        [(r["vessel"], r["bag"], r["time"]) for r in pool_rows]
+    assert [(r["vessel"], r["bag"], r["time"]) for r in rows] == [(r["vessel"], r["bag"], r["time"]) for r in pool_rows]
     for mine, theirs in zip(rows, pool_rows):
         assert float(mine["K"]) == pytest.approx(float(theirs["K"]), rel=1e-9)
     assert "bags/min" in capsys.readouterr().out

@@ -1,4 +1,5 @@
 """A fixed-seed sample of ``ship-ident bench hidden-effects``: effects hidden on random vessels."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -34,13 +35,17 @@ def test_a_long_rudder_delay_on_a_quick_boat_is_found():
     """The issue's worst miss: a 1.9 s dead time on a boat with T1 = 3.8 s and T3 = 0.07 s hid in
     T2 and T3 (T1 = T2 = 2.9 s, T3 = 0) and the search from tau = 0 stopped at 0.7 s; the dead
     time profiled over a grid finds it and removes most of the held-out error."""
-    vessel = Vessel("quick", "a quick boat with a long steering dead time",
-                    dict(K=0.594, T1=3.845, T2=0.2, T3=0.069, tau=1.869), speed=3.0,
-                    rudder_rate=np.radians(20.0))
+    vessel = Vessel(
+        "quick",
+        "a quick boat with a long steering dead time",
+        dict(K=0.594, T1=3.845, T2=0.2, T3=0.069, tau=1.869),
+        speed=3.0,
+        rudder_rate=np.radians(20.0),
+    )
     sim = simulate("random", vessel, effects=("rudder_delay",), duration=600.0, seed=6)
     result = diagnose(sim.dataset, workers=1)
     top = result.candidates[0]
     print(top.effect, top.improvement_yaw_rate, top.t_statistic, top.estimate.parameters)
     assert top.effect == "rudder_delay" and top.significant and result.verdict == "missing_effect"
-    assert top.improvement_yaw_rate > 0.7                                  # measured: 79 %
+    assert top.improvement_yaw_rate > 0.7  # measured: 79 %
     assert top.estimate.parameters["tau"] == pytest.approx(1.869, rel=0.1)

@@ -1,5 +1,6 @@
 """The rudder-noise model: its Kalman innovations are white on real simulated records, the
 Cramer-Rao bound that carries it, and the prediction-error estimator that reaches that bound."""
+
 import numpy as np
 import pytest
 
@@ -15,8 +16,9 @@ NOISE = Noise()
 
 def true_rudder_record(sim) -> Dataset:
     d = sim.dataset
-    return Dataset(time=d.time, rudder=sim.true_rudder, heading=sim.true_heading, yaw_rate=sim.true_yaw_rate,
-                   meta=d.meta)
+    return Dataset(
+        time=d.time, rudder=sim.true_rudder, heading=sim.true_heading, yaw_rate=sim.true_yaw_rate, meta=d.meta
+    )
 
 
 def test_innovations_of_a_free_run_on_the_noisy_rudder_are_white():
@@ -26,10 +28,11 @@ def test_innovations_of_a_free_run_on_the_noisy_rudder_are_white():
     h, truth = sim.dataset.sample_time, sim.truth
     psi, r = sim.structure.simulate(truth, sim.dataset, initial=[(0.0, 0.0, 0.0)], substeps=fit_substeps(h, truth))
     errors = np.column_stack([sim.dataset.heading - psi, sim.dataset.yaw_rate - r])
-    kalman = innovation_filter(noise_model(2, truth, h, fit_substeps(h, truth), NOISE.rudder, NOISE.heading,
-                                           NOISE.yaw_rate))
+    kalman = innovation_filter(
+        noise_model(2, truth, h, fit_substeps(h, truth), NOISE.rudder, NOISE.heading, NOISE.yaw_rate)
+    )
     white = kalman.whiten(errors)
-    assert np.std(errors[:, 0]) > 1.3 * NOISE.heading          # the rudder-noise walk is there
+    assert np.std(errors[:, 0]) > 1.3 * NOISE.heading  # the rudder-noise walk is there
     np.testing.assert_allclose(white.var(axis=0), 1.0, atol=0.06)
     for i in range(2):
         assert abs(np.corrcoef(white[:-1, i], white[1:, i])[0, 1]) < 0.05
@@ -58,8 +61,15 @@ def test_prediction_error_reaches_the_bound_with_a_noisy_rudder():
     bounds = {q: [] for q in quantities}
     for seed in range(12):
         sim = simulate("zigzag20", noise=NOISE, duration=180.0, seed=1000 + seed)
-        b = cramer_rao_bound(sim.structure, sim.truth, true_rudder_record(sim), [(0.0, 0.0, 0.0)],
-                             NOISE.heading, NOISE.yaw_rate, NOISE.rudder)
+        b = cramer_rao_bound(
+            sim.structure,
+            sim.truth,
+            true_rudder_record(sim),
+            [(0.0, 0.0, 0.0)],
+            NOISE.heading,
+            NOISE.yaw_rate,
+            NOISE.rudder,
+        )
         truth = with_time_constant(sim.truth)
         for q in quantities:
             bounds[q].append(b[q])
@@ -67,8 +77,10 @@ def test_prediction_error_reaches_the_bound_with_a_noisy_rudder():
             found = with_time_constant(make_estimator(method).fit(sim.structure, sim.dataset).parameters)
             for q in quantities:
                 by_quantity[q].append(found[q] - truth[q])
-    rms = {m: {q: float(np.sqrt(np.mean(np.square(e[q])) / np.mean(np.square(bounds[q])))) for q in quantities}
-           for m, e in errors.items()}
+    rms = {
+        m: {q: float(np.sqrt(np.mean(np.square(e[q])) / np.mean(np.square(bounds[q])))) for q in quantities}
+        for m, e in errors.items()
+    }
     print("RMS error / CRB:", rms)
     for q in quantities:
         assert rms["rwlssvm+pem"][q] < 1.3 < rms["rwlssvm+oe"][q], (q, rms)
@@ -83,5 +95,6 @@ def test_noise_model_without_rudder_noise_is_plain_weighting():
     sim = simulate("zigzag20", noise=0.0, duration=60.0, seed=0)
     model = noise_model(2, sim.truth, 0.1, 2, 0.0, NOISE.heading, NOISE.yaw_rate)
     errors = np.random.default_rng(0).normal(size=(500, 2)) * [NOISE.heading, NOISE.yaw_rate]
-    np.testing.assert_allclose(innovation_filter(model).whiten(errors),
-                               errors / [NOISE.heading, NOISE.yaw_rate], rtol=1e-6)
+    np.testing.assert_allclose(
+        innovation_filter(model).whiten(errors), errors / [NOISE.heading, NOISE.yaw_rate], rtol=1e-6
+    )

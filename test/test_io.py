@@ -1,17 +1,27 @@
 """Bags and CSV files: round trips, independent readers, Imu input, ros2-bag-style bags, bad input."""
+
 import math
 import shutil
 
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import CompressionType, Writer as McapWriter
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from ship_ident.dataset import DataError, join_recordings
-from ship_ident.io import (BagWriter, Topics, load_dataset, parse_columns, read_samples, typestore,
-                           wrap_angle, write_simulation)
+from ship_ident.io import (
+    BagWriter,
+    Topics,
+    load_dataset,
+    parse_columns,
+    read_samples,
+    typestore,
+    wrap_angle,
+    write_simulation,
+)
 from ship_ident.simulator import simulate
 
 FORMATS = {"rosbag2": "bag", "mcap": "run.mcap", "csv": "run.csv"}
@@ -50,8 +60,9 @@ def test_rosbag2_reads_with_rosbags_alone(written, clean_nomoto2):
     with AnyReader([written["rosbag2"]]) as reader:
         assert sorted(c.topic for c in reader.connections) == sorted(TOPICS)
         assert {c.msgtype for c in reader.connections} == {"std_msgs/msg/Float64"}
-        heading = [reader.deserialize(raw, c.msgtype).data
-                   for c, _, raw in reader.messages() if c.topic == "/usv/heading"]
+        heading = [
+            reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages() if c.topic == "/usv/heading"
+        ]
     np.testing.assert_array_equal(heading, sim.meta["wrapped_heading"])
     assert max(heading) <= math.pi and min(heading) > -math.pi
 
@@ -82,20 +93,22 @@ def test_read_samples_is_time_ordered_with_roles(written):
 def write_imu_bag(path, sim, stamped: bool):
     """Heading and yaw rate as ENU sensor_msgs/Imu stamped t + 1000 s, logged 50 ms later; or unstamped."""
     types = typestore().types
-    Imu, Header, Time = types["sensor_msgs/msg/Imu"], types["std_msgs/msg/Header"], \
-        types["builtin_interfaces/msg/Time"]
+    Imu, Header, Time = types["sensor_msgs/msg/Imu"], types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
     Quaternion, Vector3 = types["geometry_msgs/msg/Quaternion"], types["geometry_msgs/msg/Vector3"]
     d, offset, delay = sim.dataset, STAMP_OFFSET if stamped else 0.0, 0.05 if stamped else 0.0
     with BagWriter(path, "rosbag2") as writer:
         for t, rudder, psi, r in zip(d.time, d.rudder, d.meta["wrapped_heading"], d.yaw_rate):
             yaw_enu = math.pi / 2 - psi
             ns = int(round((t + offset) * 1e9)) if stamped else 0
-            msg = Imu(header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="imu"),
-                      orientation=Quaternion(x=0.0, y=0.0, z=math.sin(yaw_enu / 2), w=math.cos(yaw_enu / 2)),
-                      orientation_covariance=np.zeros(9),
-                      angular_velocity=Vector3(x=0.0, y=0.0, z=-r), angular_velocity_covariance=np.zeros(9),
-                      linear_acceleration=Vector3(x=0.0, y=0.0, z=9.81),
-                      linear_acceleration_covariance=np.zeros(9))
+            msg = Imu(
+                header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="imu"),
+                orientation=Quaternion(x=0.0, y=0.0, z=math.sin(yaw_enu / 2), w=math.cos(yaw_enu / 2)),
+                orientation_covariance=np.zeros(9),
+                angular_velocity=Vector3(x=0.0, y=0.0, z=-r),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=Vector3(x=0.0, y=0.0, z=9.81),
+                linear_acceleration_covariance=np.zeros(9),
+            )
             writer.write("/imu/data", "sensor_msgs/msg/Imu", msg, t + offset + delay)
             writer.write("/usv/rudder", "std_msgs/msg/Float64", float64(rudder), t + offset)
 
@@ -108,8 +121,7 @@ def test_imu_in_enu_reads_as_ned_heading_and_yaw_rate(clean_nomoto2, tmp_path, s
     np.testing.assert_allclose(data.time - (STAMP_OFFSET if stamped else 0.0), sim.time, atol=1e-6)
     np.testing.assert_allclose(data.heading, sim.heading, atol=1e-12)
     np.testing.assert_allclose(data.yaw_rate, sim.yaw_rate, atol=1e-12)
-    heading = [s.value for s in read_samples(tmp_path / "imu", Topics(imu="/imu/data"))
-               if s.role == "heading"]
+    heading = [s.value for s in read_samples(tmp_path / "imu", Topics(imu="/imu/data")) if s.role == "heading"]
     assert max(heading) <= math.pi and min(heading) > -math.pi
 
 
@@ -132,25 +144,32 @@ def write_ros2_bag_record_style(folder, sim, version):
     """What ``ros2 bag record -s mcap`` leaves: zstd chunks, QoS in channel metadata, metadata.yaml."""
     folder.mkdir()
     d = sim.dataset
-    columns = {"/usv/rudder": d.rudder, "/usv/heading": d.meta["wrapped_heading"],
-               "/usv/yaw_rate": d.yaw_rate}
-    qos = ("- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n  deadline:\n    sec: 0\n"
-           "    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n  liveliness: 1\n"
-           "  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n  avoid_ros_namespace_conventions: false")
+    columns = {"/usv/rudder": d.rudder, "/usv/heading": d.meta["wrapped_heading"], "/usv/yaw_rate": d.yaw_rate}
+    qos = (
+        "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n  deadline:\n    sec: 0\n"
+        "    nsec: 0\n  lifespan:\n    sec: 0\n    nsec: 0\n  liveliness: 1\n"
+        "  liveliness_lease_duration:\n    sec: 0\n    nsec: 0\n  avoid_ros_namespace_conventions: false"
+    )
     msgdef, _ = typestore().generate_msgdef("std_msgs/msg/Float64", ros_version=2)
     start_ns = 1_700_000_000 * 10**9
     with (folder / "trip_0.mcap").open("wb") as f:
         writer = McapWriter(f, compression=CompressionType.ZSTD, chunk_size=4096)
         writer.start(profile="ros2", library="rosbag2 (imitated)")
         schema = writer.register_schema("std_msgs/msg/Float64", "ros2msg", msgdef.encode())
-        channels = {topic: writer.register_channel(topic, "cdr", schema,
-                                                   {"offered_qos_profiles": qos, "topic_type_hash": ""})
-                    for topic in columns}
+        channels = {
+            topic: writer.register_channel(topic, "cdr", schema, {"offered_qos_profiles": qos, "topic_type_hash": ""})
+            for topic in columns
+        }
         for i, t in enumerate(d.time):
             for topic, values in columns.items():
                 ns = start_ns + int(round(t * 1e9))
-                writer.add_message(channels[topic], ns, typestore().serialize_cdr(
-                    float64(values[i]), "std_msgs/msg/Float64"), ns, sequence=i)
+                writer.add_message(
+                    channels[topic],
+                    ns,
+                    typestore().serialize_cdr(float64(values[i]), "std_msgs/msg/Float64"),
+                    ns,
+                    sequence=i,
+                )
         writer.finish()
     n, duration = len(d.time), int(round(d.time[-1] * 1e9))
     topics = "".join(
@@ -163,17 +182,20 @@ def write_ros2_bag_record_style(folder, sim, version):
         f"            liveliness_lease_duration:\n              sec: 9223372036\n"
         f"              nsec: 854775807\n            avoid_ros_namespace_conventions: false\n"
         f"        type_description_hash: RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18\n"
-        f"      message_count: {n}\n" for topic in columns)
+        f"      message_count: {n}\n"
+        for topic in columns
+    )
     (folder / "metadata.yaml").write_text(
         "rosbag2_bagfile_information:\n"
         f"  version: {version}\n  storage_identifier: mcap\n"
         f"  duration:\n    nanoseconds: {duration}\n"
         f"  starting_time:\n    nanoseconds_since_epoch: {start_ns}\n"
         f"  message_count: {3 * n}\n  topics_with_message_count:\n{topics}"
-        "  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n    - trip_0.mcap\n"
+        '  compression_format: ""\n  compression_mode: ""\n  relative_file_paths:\n    - trip_0.mcap\n'
         f"  files:\n    - path: trip_0.mcap\n      starting_time:\n        nanoseconds_since_epoch: {start_ns}\n"
         f"      duration:\n        nanoseconds: {duration}\n      message_count: {3 * n}\n"
-        "  custom_data: ~\n  ros_distro: kilted\n")
+        "  custom_data: ~\n  ros_distro: kilted\n"
+    )
 
 
 @pytest.mark.parametrize("version", [9, 10], ids=["v9", "v10_unknown_to_rosbags"])
@@ -192,27 +214,46 @@ def test_bag_writer_writes_output_types_and_closes_on_interrupt(tmp_path, fmt):
     types = typestore().types
     path = tmp_path / ("out" if fmt == "rosbag2" else "out.mcap")
     layout = types["std_msgs/msg/MultiArrayLayout"](
-        dim=[types["std_msgs/msg/MultiArrayDimension"](label="K,T", size=2, stride=2)], data_offset=0)
+        dim=[types["std_msgs/msg/MultiArrayDimension"](label="K,T", size=2, stride=2)], data_offset=0
+    )
     status = types["diagnostic_msgs/msg/DiagnosticStatus"](
-        level=0, name="ship_ident", message="ok", hardware_id="usv",
-        values=[types["diagnostic_msgs/msg/KeyValue"](key="K", value="0.5")])
+        level=0,
+        name="ship_ident",
+        message="ok",
+        hardware_id="usv",
+        values=[types["diagnostic_msgs/msg/KeyValue"](key="K", value="0.5")],
+    )
     with pytest.raises(KeyboardInterrupt), BagWriter(path, fmt) as writer:
         for i in range(3):
-            writer.write("/ship_ident/estimate", "std_msgs/msg/String",
-                         types["std_msgs/msg/String"](data=f'{{"i": {i}}}'), i * 1.0)
-            writer.write("/ship_ident/parameters", "std_msgs/msg/Float64MultiArray",
-                         types["std_msgs/msg/Float64MultiArray"](layout=layout, data=np.array([0.5, 1.5])),
-                         i * 1.0)
-            writer.write("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray",
-                         types["diagnostic_msgs/msg/DiagnosticArray"](
-                             header=types["std_msgs/msg/Header"](
-                                 stamp=types["builtin_interfaces/msg/Time"](sec=i, nanosec=0), frame_id=""),
-                             status=[status]), i * 1.0)
+            writer.write(
+                "/ship_ident/estimate",
+                "std_msgs/msg/String",
+                types["std_msgs/msg/String"](data=f'{{"i": {i}}}'),
+                i * 1.0,
+            )
+            writer.write(
+                "/ship_ident/parameters",
+                "std_msgs/msg/Float64MultiArray",
+                types["std_msgs/msg/Float64MultiArray"](layout=layout, data=np.array([0.5, 1.5])),
+                i * 1.0,
+            )
+            writer.write(
+                "/diagnostics",
+                "diagnostic_msgs/msg/DiagnosticArray",
+                types["diagnostic_msgs/msg/DiagnosticArray"](
+                    header=types["std_msgs/msg/Header"](
+                        stamp=types["builtin_interfaces/msg/Time"](sec=i, nanosec=0), frame_id=""
+                    ),
+                    status=[status],
+                ),
+                i * 1.0,
+            )
         raise KeyboardInterrupt
     mcap_file = next(path.glob("*.mcap")) if path.is_dir() else path
     with mcap_file.open("rb") as f:
-        decoded = [(c.topic, m) for _, c, _, m in
-                   make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()]
+        decoded = [
+            (c.topic, m) for _, c, _, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
+        ]
     assert len(decoded) == 9
     last = {topic: msg for topic, msg in decoded}
     assert last["/ship_ident/estimate"].data == '{"i": 2}'
@@ -230,6 +271,7 @@ def test_bag_writer_rejects_a_second_type_on_a_topic(tmp_path):
 
 
 # --- bad input: every case raises DataError with one sentence naming the problem ----------------
+
 
 def make_bad_input(kind: str, folder, good_mcap):
     """Create one kind of bad input in ``folder``; return its path."""
@@ -267,8 +309,7 @@ def make_bad_input(kind: str, folder, good_mcap):
         with BagWriter(folder / "typed.mcap", "mcap") as writer:
             for topic in ("/usv/rudder", "/usv/yaw_rate"):
                 writer.write(topic, "std_msgs/msg/Float64", float64(0.1), 0.0)
-            writer.write("/usv/heading", "std_msgs/msg/String",
-                         typestore().types["std_msgs/msg/String"](data="N"), 0.0)
+            writer.write("/usv/heading", "std_msgs/msg/String", typestore().types["std_msgs/msg/String"](data="N"), 0.0)
         return folder / "typed.mcap"
     csv_text = {
         "csv_missing_column": "t,rudder,heading\n0,0,0\n0.1,0,0\n",
@@ -309,6 +350,7 @@ def test_bad_input_raises_one_clear_data_error(kind, tmp_path, written):
 
 # --- several recordings, CSV columns by name ------------------------------------------------
 
+
 def test_joined_recordings_are_named_and_resampled_to_one_step():
     """Two recordings of different steps: the second is resampled onto the first's 0.1 s, each keeps
     its own segment, and meta["recordings"] gives each one's name and sample range."""
@@ -317,18 +359,22 @@ def test_joined_recordings_are_named_and_resampled_to_one_step():
     joined = join_recordings([fine, coarse], ["zigzag.csv", "turning.mcap"])
     n = fine.n_samples
     assert joined.sample_time == pytest.approx(0.1)
-    assert joined.n_samples == n + 201                       # 20 s at 0.1 s, both ends included
-    assert joined.segments == ((0, n), (n, n + 201))         # never bridged
-    assert joined.meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": n},
-                                         {"name": "turning.mcap", "start": n, "stop": n + 201}]
+    assert joined.n_samples == n + 201  # 20 s at 0.1 s, both ends included
+    assert joined.segments == ((0, n), (n, n + 201))  # never bridged
+    assert joined.meta["recordings"] == [
+        {"name": "zigzag.csv", "start": 0, "stop": n},
+        {"name": "turning.mcap", "start": n, "stop": n + 201},
+    ]
     assert np.all(np.diff(joined.time) > 0) and len(joined.gaps) == 1
     np.testing.assert_array_equal(joined.yaw_rate[:n], fine.yaw_rate)
     np.testing.assert_allclose(joined.yaw_rate[n::2], coarse.yaw_rate, rtol=0, atol=1e-12)  # 0.2 s samples kept
     midpoints = 0.5 * (coarse.yaw_rate[:-1] + coarse.yaw_rate[1:])
-    np.testing.assert_allclose(joined.yaw_rate[n + 1::2], midpoints, rtol=0, atol=1e-12)
-    tail = joined.slice(n - 10, joined.n_samples)                 # e.g. a held-out tail
-    assert tail.meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": 10},
-                                       {"name": "turning.mcap", "start": 10, "stop": 211}]
+    np.testing.assert_allclose(joined.yaw_rate[n + 1 :: 2], midpoints, rtol=0, atol=1e-12)
+    tail = joined.slice(n - 10, joined.n_samples)  # e.g. a held-out tail
+    assert tail.meta["recordings"] == [
+        {"name": "zigzag.csv", "start": 0, "stop": 10},
+        {"name": "turning.mcap", "start": 10, "stop": 211},
+    ]
     assert joined.slice(0, 5).meta["recordings"] == [{"name": "zigzag.csv", "start": 0, "stop": 5}]
     on_coarse = join_recordings([fine, coarse], sample_time=0.2)
     assert on_coarse.sample_time == pytest.approx(0.2) and on_coarse.n_samples == (n + 1) // 2 + 101
@@ -358,7 +404,7 @@ def renamed_csv(source, header: str, target):
 def test_csv_synonyms_are_read_without_options(written, tmp_path, header):
     path = renamed_csv(written["csv"], header, tmp_path / "renamed.csv")
     data = load_dataset(path)
-    assert_same_data(data, load_dataset(written["csv"]))    # the speed too: surge_speed is the speed
+    assert_same_data(data, load_dataset(written["csv"]))  # the speed too: surge_speed is the speed
     assert data.meta["columns"] == dict(zip(("t", "rudder", "heading", "yaw_rate", "speed"), header.split(",")))
 
 
@@ -370,13 +416,16 @@ def test_csv_columns_by_name(written, tmp_path):
     assert data.meta["columns"]["speed"] == "log"
 
 
-@pytest.mark.parametrize("columns, words", [
-    ("speed=surge", "has no column 'surge'"),
-    ("sped=speed", "unknown role 'sped'"),
-    ("speed", "is not ROLE=COLUMN"),
-    ("speed=log,speed=u", "twice"),
-    ("rudder=heading", "so heading has none"),
-])
+@pytest.mark.parametrize(
+    "columns, words",
+    [
+        ("speed=surge", "has no column 'surge'"),
+        ("sped=speed", "unknown role 'sped'"),
+        ("speed", "is not ROLE=COLUMN"),
+        ("speed=log,speed=u", "twice"),
+        ("rudder=heading", "so heading has none"),
+    ],
+)
 def test_bad_columns_are_one_clear_data_error(written, columns, words):
     with pytest.raises(DataError) as caught:
         load_dataset(written["csv"], Topics(csv_columns=parse_columns(columns)))

@@ -1,11 +1,11 @@
 """The identifier node as a real process over real DDS, fed by `ship-ident play` or a scripted publisher."""
+
 import itertools
 import json
 import math
 import os
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -39,8 +39,9 @@ def env(domain_id, tmp_path):
 
 
 def node_process(env, *parameters):
-    return start_node(env, "use_sim_time:=true", *parameters, stdout=subprocess.PIPE,
-                      stderr=subprocess.STDOUT, text=True)
+    return start_node(
+        env, "use_sim_time:=true", *parameters, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
 
 
 def final_estimate(listener):
@@ -66,8 +67,13 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
     assert final["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)
     assert listener.parameters[-1].layout.dim[0].label == "K,T1,T2,T3,delta_r,alpha"
     assert any(s.name == "ship_ident: identification" for s in listener.diagnostics)
-    replayed = subprocess.run([sys.executable, "-m", "ship_ident.cli", "replay", str(path), "--json"],
-                              capture_output=True, text=True, timeout=120, env=env)
+    replayed = subprocess.run(
+        [sys.executable, "-m", "ship_ident.cli", "replay", str(path), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
     records = [json.loads(line) for line in replayed.stdout.splitlines()]
     twin = min(records, key=lambda r: abs(r["stamp"] - final["stamp"]))
     # The node's schedule starts at its first /clock reading, replay's at the bag's first sample:
@@ -105,8 +111,10 @@ def test_effects_change_at_run_time(env, domain_id, bag):
         rejected = set_parameter("rudder_topic", Parameter.Type.STRING, "/other")
         assert not rejected.successful  # topics are read-only
         assert set_parameter("effects", Parameter.Type.STRING_ARRAY, ["gyro_bias"]).successful
-        changed = lambda: any(e["new_estimate"] and e["structure"]["effects"] == ["gyro_bias"]
-                              for e in listener.estimates)
+
+        def changed():
+            return any(e["new_estimate"] and e["structure"]["effects"] == ["gyro_bias"] for e in listener.estimates)
+
         assert listener.spin(20.0, changed)
         listener.spin(1.0)
         assert node.poll() is None
@@ -131,18 +139,18 @@ def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
 
         def send(i, t, skip=()):
             player.publish_clock(t)
-            for role, value in (("rudder", d.rudder[i]), ("heading", d.heading[i]),
-                                ("yaw_rate", d.yaw_rate[i])):
+            for role, value in (("rudder", d.rudder[i]), ("heading", d.heading[i]), ("yaw_rate", d.yaw_rate[i])):
                 if role not in skip:
                     player.publish(role, value)
             listener.spin(0.005)  # 20x real time
 
-        for i in range(400):                                  # 0 .. 40 s clean
+        for i in range(400):  # 0 .. 40 s clean
             send(i, 0.1 * i)
-        player.publish("rudder", math.nan)                    # faults at 40 s
+        player.publish("rudder", math.nan)  # faults at 40 s
         player.publish("heading", math.inf)
         player.publish("yaw_rate", 100.0)
-        player.publish("rudder", d.rudder[399])               # same clock: duplicate stamp
+        player.publish("rudder", d.rudder[399])  # same clock: duplicate stamp
+
         def settle_clock(t):  # /clock and data travel apart over DDS: let the step land first
             for _ in range(3):
                 player.publish_clock(t)
@@ -156,9 +164,9 @@ def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
             listener.spin(0.1)
             settle_clock(39.95 + 0.01 * k)
             player.publish("yaw_rate", d.yaw_rate[400])
-        for i in range(400, 600):                             # yaw rate silent 45 .. 50 s
+        for i in range(400, 600):  # yaw rate silent 45 .. 50 s
             send(i, 0.1 * i, skip=("yaw_rate",) if 450 <= i < 500 else ())
-        for i in range(600, 700):                             # clock jumps back 30 s at 60 s
+        for i in range(600, 700):  # clock jumps back 30 s at 60 s
             send(i, 0.1 * i - 30.0)
         listener.spin(1.0)
         assert node.poll() is None
@@ -169,7 +177,7 @@ def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
     for status in listener.diagnostics:
         for kv in status.values:
             if kv.key.startswith("condition/"):
-                reported.setdefault(kv.key[len("condition/"):], []).append(kv.value)
+                reported.setdefault(kv.key[len("condition/") :], []).append(kv.value)
     rejected = " ".join(reported.get("rejected_samples", []))
     for word in ("non-finite", "absurd", "duplicate", "out-of-order"):
         assert word in rejected, reported
@@ -181,12 +189,18 @@ def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
 
 
 def test_node_rejects_bad_start_parameters_in_one_line(env):
-    result = subprocess.run([sys.executable, "-m", "ship_ident.node", "--ros-args",
-                             "-p", "effects:=[barnacles]"], env=env, capture_output=True, text=True,
-                            timeout=30)
+    result = subprocess.run(
+        [sys.executable, "-m", "ship_ident.node", "--ros-args", "-p", "effects:=[barnacles]"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert result.returncode == 2
-    assert result.stderr.strip().splitlines() == [
-        result.stderr.strip().splitlines()[-1]] and "unknown effect" in result.stderr
+    assert (
+        result.stderr.strip().splitlines() == [result.stderr.strip().splitlines()[-1]]
+        and "unknown effect" in result.stderr
+    )
 
 
 def test_node_stops_on_sigterm(env):
@@ -212,8 +226,13 @@ def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id,
     from std_msgs.msg import String
 
     d = simulate("mixed", duration=100.0, seed=7).dataset
-    node = node_process(env, "refit_period:=2.0", "window_length:=30.0", "min_window_length:=10.0",
-                        f"log_directory:={tmp_path / 'estimates'}")
+    node = node_process(
+        env,
+        "refit_period:=2.0",
+        "window_length:=30.0",
+        "min_window_length:=10.0",
+        f"log_directory:={tmp_path / 'estimates'}",
+    )
     listener = Listener(domain_id)
     player = Player(listener.node)
     other = None
@@ -235,10 +254,9 @@ def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id,
         if other is not None:
             other.close()
     assert code == 0, log
-    sentences = [kv.value for s in listener.diagnostics for kv in s.values
-                 if kv.key == "condition/wrong_message_type"]
+    sentences = [kv.value for s in listener.diagnostics for kv in s.values if kv.key == "condition/wrong_message_type"]
     assert sentences and "/usv/rudder carries std_msgs/msg/String" in sentences[-1]
     published = [e for e in listener.estimates if e["new_estimate"]]
     logged = [json.loads(line) for line in (tmp_path / "estimates" / "estimates.jsonl").read_text().splitlines()]
     assert len(published) >= 5 and all(e["new_estimate"] for e in logged)
-    assert [e["stamp"] for e in logged][-len(published):] == [e["stamp"] for e in published]
+    assert [e["stamp"] for e in logged][-len(published) :] == [e["stamp"] for e in published]

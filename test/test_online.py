@@ -1,4 +1,5 @@
 """OnlineIdentifier: window bounds, input checks, schedule, gating, with numbers."""
+
 import json
 import math
 import re
@@ -17,10 +18,11 @@ def stream(dataset, start=0.0, rudder=None):
     """The dataset as time-ordered samples (heading wrapped as a compass gives it)."""
     rudder = dataset.rudder if rudder is None else rudder
     wrapped = np.mod(dataset.heading + np.pi, 2 * np.pi) - np.pi
-    return [Sample(float(t) + start, role, float(v))
-            for i, t in enumerate(dataset.time)
-            for role, v in (("rudder", rudder[i]), ("heading", wrapped[i]),
-                            ("yaw_rate", dataset.yaw_rate[i]))]
+    return [
+        Sample(float(t) + start, role, float(v))
+        for i, t in enumerate(dataset.time)
+        for role, v in (("rudder", rudder[i]), ("heading", wrapped[i]), ("yaw_rate", dataset.yaw_rate[i]))
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -33,13 +35,19 @@ def test_add_rejects_bad_samples_and_counts_them():
     assert ident.add(Sample(1.0, "rudder", 0.1)) == "accepted"
     assert ident.add(Sample(1.1, "rudder", math.nan)) == "non_finite"
     assert ident.add(Sample(1.1, "heading", math.inf)) == "non_finite"
-    assert ident.add(Sample(1.1, "rudder", 2.0)) == "absurd"        # 115 deg of rudder
-    assert ident.add(Sample(1.1, "yaw_rate", -10.0)) == "absurd"    # 570 deg/s
+    assert ident.add(Sample(1.1, "rudder", 2.0)) == "absurd"  # 115 deg of rudder
+    assert ident.add(Sample(1.1, "yaw_rate", -10.0)) == "absurd"  # 570 deg/s
     assert ident.add(Sample(1.0, "rudder", 0.1)) == "duplicate"
     assert ident.add(Sample(0.5, "rudder", 0.1)) == "out_of_order"  # 0.5 s back: < 1 s jump threshold
     assert ident.add(Sample(1.2, "rudder", 0.1)) == "accepted"
-    assert ident.counts == {"accepted": 2, "non_finite": 2, "absurd": 2, "out_of_order": 1,
-                            "duplicate": 1, "clock_jumps": 0}
+    assert ident.counts == {
+        "accepted": 2,
+        "non_finite": 2,
+        "absurd": 2,
+        "out_of_order": 1,
+        "duplicate": 1,
+        "clock_jumps": 0,
+    }
 
 
 def test_clock_jump_back_resets_window_and_schedule(sim):
@@ -48,15 +56,14 @@ def test_clock_jump_back_resets_window_and_schedule(sim):
     assert records[-1].new_estimate
     assert ident.add(Sample(40.0, "rudder", 0.0)) == "accepted"  # 60 s back: a jump, not out of order
     assert ident.counts["clock_jumps"] == 1
-    assert not ident.due(44.9) and ident.due(45.0)                 # schedule restarted at 40 s
+    assert not ident.due(44.9) and ident.due(45.0)  # schedule restarted at 40 s
     record = ident.refit(45.0)
     assert "clock_jump" in record.conditions and "no_data" in record.conditions
     assert not record.new_estimate and record.estimate is not None  # the last good one is kept
 
 
 def test_window_is_bounded_by_length_and_count(sim):
-    ident = OnlineIdentifier(OnlineConfig(window_length=20.0, min_window_length=10.0,
-                                          max_window_samples=200))
+    ident = OnlineIdentifier(OnlineConfig(window_length=20.0, min_window_length=10.0, max_window_samples=200))
     records = list(run_schedule(ident, stream(sim.dataset.slice(0, 600))))  # 0 .. 60 s at 10 Hz
     last = records[-1]
     assert last.time == 55.0 and last.window[0] >= 35.0 - 1e-9  # never older than window_length
@@ -67,15 +74,15 @@ def test_window_is_bounded_by_length_and_count(sim):
 
 def test_schedule_runs_every_refit_period_and_skips_ahead():
     ident = OnlineIdentifier(OnlineConfig(refit_period=5.0))
-    assert not ident.due(100.0)            # the schedule starts at the first call
+    assert not ident.due(100.0)  # the schedule starts at the first call
     assert not ident.due(104.9)
     assert ident.due(105.0)
     record = ident.refit(105.0)
     assert "no_data" in record.conditions and record.level == 2
     assert not ident.due(109.99) and ident.due(110.0)
-    ident.skip(110.0)                      # a refit still running: skipped
+    ident.skip(110.0)  # a refit still running: skipped
     assert not ident.due(114.99) and ident.due(115.0)
-    ident.refit(200.0)                     # far behind: the schedule moves on from now
+    ident.refit(200.0)  # far behind: the schedule moves on from now
     assert not ident.due(204.9) and ident.due(205.0)
 
 
@@ -96,10 +103,15 @@ def test_little_rudder_keeps_last_good_estimate_flagged(sim):
     heading = float(sim.dataset.heading[999])
     n = 1000  # then 100 s steady on course: rudder 0.1 deg, yaw rate and heading only noise
     time = 100.0 + 0.1 * np.arange(n)
-    quiet = [Sample(float(t), role, float(v)) for i, t in enumerate(time)
-             for role, v in (("rudder", 0.002 + 0.0017 * rng.standard_normal()),
-                             ("heading", heading + 0.0017 * rng.standard_normal()),
-                             ("yaw_rate", 0.0035 * rng.standard_normal()))]
+    quiet = [
+        Sample(float(t), role, float(v))
+        for i, t in enumerate(time)
+        for role, v in (
+            ("rudder", 0.002 + 0.0017 * rng.standard_normal()),
+            ("heading", heading + 0.0017 * rng.standard_normal()),
+            ("yaw_rate", 0.0035 * rng.standard_normal()),
+        )
+    ]
     records += list(run_schedule(ident, quiet))
     good = [r for r in records if r.new_estimate][-1]
     last = records[-1]
@@ -132,19 +144,22 @@ def test_replay_schedule_recovers_truth(sim):
     assert abs(final.predicted_yaw_rate - final.measured_yaw_rate) < math.radians(1.0)
 
 
-@pytest.mark.parametrize("values, message", [
-    (dict(model="nomoto3"), "unknown model"),
-    (dict(effects=("rudder_offset", "barnacles")), "unknown effect"),
-    (dict(method="magic"), "unknown method"),
-    (dict(window_length=-1.0), "window_length"),
-    (dict(refit_period=math.nan), "refit_period"),
-    (dict(min_window_length=500.0), "min_window_length"),
-    (dict(max_window_samples=10), "max_window_samples"),
-    (dict(max_window_samples=50_000_000), "GB"),  # a window that would not fit in memory
-    (dict(effects="speed_dependence"), "speed_topic"),
-    (dict(change_ratio=0.5), "change_ratio"),
-    (dict(change_test_length=0.0), "change_test_length"),
-])
+@pytest.mark.parametrize(
+    "values, message",
+    [
+        (dict(model="nomoto3"), "unknown model"),
+        (dict(effects=("rudder_offset", "barnacles")), "unknown effect"),
+        (dict(method="magic"), "unknown method"),
+        (dict(window_length=-1.0), "window_length"),
+        (dict(refit_period=math.nan), "refit_period"),
+        (dict(min_window_length=500.0), "min_window_length"),
+        (dict(max_window_samples=10), "max_window_samples"),
+        (dict(max_window_samples=50_000_000), "GB"),  # a window that would not fit in memory
+        (dict(effects="speed_dependence"), "speed_topic"),
+        (dict(change_ratio=0.5), "change_ratio"),
+        (dict(change_test_length=0.0), "change_test_length"),
+    ],
+)
 def test_config_errors_say_what_is_wrong(values, message):
     with pytest.raises(ConfigError, match=message):
         OnlineConfig(**values).validate()
@@ -190,7 +205,7 @@ def test_a_changed_vessel_restarts_the_window():
 def test_variance_step_is_located_to_a_few_samples():
     rng = np.random.default_rng(4)
     errors = np.concatenate([rng.normal(0, 1.0, 370), rng.normal(0, 4.0, 230)])  # steps at 370
-    assert abs(variance_change_point(errors ** 2) - 370) <= 5
+    assert abs(variance_change_point(errors**2) - 370) <= 5
 
 
 def test_no_change_alarm_on_a_steady_vessel():
@@ -212,7 +227,7 @@ def conditions_seen(records) -> dict:
 def test_clock_jump_forward_restarts_schedule_and_keeps_recent_window(sim):
     ident = OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0))
     records = list(run_schedule(ident, stream(sim.dataset.slice(0, 1000))))  # 0 .. 100 s
-    later = stream(sim.dataset.slice(1000, 1600), start=-100.0 + 130.0)     # resumes at 130 s
+    later = stream(sim.dataset.slice(1000, 1600), start=-100.0 + 130.0)  # resumes at 130 s
     records = list(run_schedule(ident, later))
     assert ident.counts["clock_jumps"] == 1
     jump = records[0]
@@ -224,8 +239,11 @@ def test_clock_jump_forward_restarts_schedule_and_keeps_recent_window(sim):
 
 def test_dropouts_of_one_topic_for_5_s_and_5_min(sim):
     ident = OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0))
-    samples = [s for s in stream(sim.dataset)
-               if not (s.role == "heading" and (100.0 <= s.time < 105.0 or 150.0 <= s.time < 450.0))]
+    samples = [
+        s
+        for s in stream(sim.dataset)
+        if not (s.role == "heading" and (100.0 <= s.time < 105.0 or 150.0 <= s.time < 450.0))
+    ]
     records = {r.time: r for r in run_schedule(ident, samples)}
     assert "heading" in records[105.0].conditions["stale_input"]
     assert "gap_in_window" in records[110.0].conditions and records[110.0].new_estimate
@@ -237,10 +255,11 @@ def test_dropouts_of_one_topic_for_5_s_and_5_min(sim):
 
 
 def test_heading_in_degrees_is_reported(sim):
-    degrees = [Sample(s.time, s.role, math.degrees(s.value) if s.role == "heading" else s.value)
-               for s in stream(sim.dataset.slice(0, 1200))]
-    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0,
-                                                              min_window_length=30.0)), degrees))
+    degrees = [
+        Sample(s.time, s.role, math.degrees(s.value) if s.role == "heading" else s.value)
+        for s in stream(sim.dataset.slice(0, 1200))
+    ]
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)), degrees))
     sentence = records[-1].conditions["heading_in_degrees"]
     assert "degrees" in sentence and re.search(r"5[4-9]x as fast", sentence)
     warned = [r for r in records if "heading_in_degrees" in r.conditions]
@@ -248,8 +267,12 @@ def test_heading_in_degrees_is_reported(sim):
     # the heading 57x too large wrecks the fit: its standard errors say so and nothing is published
     assert not any(r.new_estimate for r in records)
     assert "does not determine K" in records[-1].conditions["too_little_excitation"]
-    clean = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)),
-                              stream(sim.dataset.slice(0, 1200))))
+    clean = list(
+        run_schedule(
+            OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)),
+            stream(sim.dataset.slice(0, 1200)),
+        )
+    )
     assert "heading_in_degrees" not in conditions_seen(clean)
 
 
@@ -264,10 +287,11 @@ def test_heading_in_degrees_on_a_steady_course_shows_in_its_wraps():
 
 
 def test_yaw_rate_in_the_other_sign_convention_is_reported(sim):
-    flipped = [Sample(s.time, s.role, -s.value if s.role == "yaw_rate" else s.value)
-               for s in stream(sim.dataset.slice(0, 1200))]
-    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0,
-                                                              min_window_length=30.0)), flipped))
+    flipped = [
+        Sample(s.time, s.role, -s.value if s.role == "yaw_rate" else s.value)
+        for s in stream(sim.dataset.slice(0, 1200))
+    ]
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)), flipped))
     last = records[-1]
     assert "opposite ways" in last.conditions["yaw_rate_sign"] and last.status in ("WARN", "ERROR")
     assert not any(r.new_estimate for r in records)  # K < 0 is never accepted
@@ -275,12 +299,17 @@ def test_yaw_rate_in_the_other_sign_convention_is_reported(sim):
 
 def test_saturated_rudder_is_reported_but_zigzag_is_not():
     zigzag = simulate("zigzag20", duration=200.0, seed=3)
-    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)),
-                                stream(zigzag.dataset)))
+    records = list(
+        run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)), stream(zigzag.dataset))
+    )
     assert "rudder_saturated" not in conditions_seen(records)
     hard_over = np.where(zigzag.dataset.time < 120.0, zigzag.dataset.rudder, np.radians(35.0))
-    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)),
-                                stream(zigzag.dataset, rudder=hard_over)))
+    records = list(
+        run_schedule(
+            OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)),
+            stream(zigzag.dataset, rudder=hard_over),
+        )
+    )
     assert "+35.0 deg for 100 %" in records[-1].conditions["rudder_saturated"]
     assert "too_little_excitation" in records[-1].conditions and not records[-1].new_estimate
 
@@ -295,13 +324,17 @@ def test_spikes_of_50_times_the_noise_move_K_less_than_3_percent(sim, method):
     noise = {"rudder": Noise.rudder, "heading": Noise.heading, "yaw_rate": Noise.yaw_rate}
     rng = np.random.default_rng(1)
     clean = stream(sim.dataset)
-    spiky = [Sample(s.time, s.role, s.value + 50 * noise[s.role] * rng.choice([-1.0, 1.0]))
-             if rng.random() < 0.01 else s for s in clean]
+    spiky = [
+        Sample(s.time, s.role, s.value + 50 * noise[s.role] * rng.choice([-1.0, 1.0])) if rng.random() < 0.01 else s
+        for s in clean
+    ]
     config = OnlineConfig(method=method)
-    clean_K = {r.time: r.estimate["parameters"]["K"]
-               for r in run_schedule(OnlineIdentifier(config), clean) if r.new_estimate}
-    spiky_K = {r.time: r.estimate["parameters"]["K"]
-               for r in run_schedule(OnlineIdentifier(config), spiky) if r.new_estimate}
+    clean_K = {
+        r.time: r.estimate["parameters"]["K"] for r in run_schedule(OnlineIdentifier(config), clean) if r.new_estimate
+    }
+    spiky_K = {
+        r.time: r.estimate["parameters"]["K"] for r in run_schedule(OnlineIdentifier(config), spiky) if r.new_estimate
+    }
     both = sorted(set(clean_K) & set(spiky_K))
     assert len(both) >= 20
     assert max(abs(spiky_K[t] / clean_K[t] - 1) for t in both) < 0.03
@@ -342,7 +375,7 @@ def test_change_test_survives_a_clock_jump_back():
     sim = simulate("zigzag20", duration=700.0, seed=31, change=(400.0, LOADED))
     ident = OnlineIdentifier(OnlineConfig())
     list(run_schedule(ident, stream(sim.dataset.slice(0, 3000), start=1000.0)))  # 1000 .. 1300 s
-    records = list(run_schedule(ident, stream(sim.dataset)))                      # back to 0 s
+    records = list(run_schedule(ident, stream(sim.dataset)))  # back to 0 s
     assert ident.counts["clock_jumps"] == 1
     alarms = [r.time for r in records if "vessel_changed" in r.conditions]
     assert alarms and 400.0 < alarms[0] <= 430.0
@@ -355,8 +388,13 @@ def test_nothing_absurd_is_published_after_a_vessel_changes():
     vessel = random_vessel(np.random.default_rng(1), "usv")
     k_old, t1 = vessel.parameters["K"], vessel.parameters["T1"]
     change = 300.0
-    sim = simulate("random", vessel, duration=480.0, seed=1,
-                   change=(change, {"K": 0.7 * k_old, "T1": 1.3 * t1, "T": vessel.parameters["T"] + 0.3 * t1}))
+    sim = simulate(
+        "random",
+        vessel,
+        duration=480.0,
+        seed=1,
+        change=(change, {"K": 0.7 * k_old, "T1": 1.3 * t1, "T": vessel.parameters["T"] + 0.3 * t1}),
+    )
     k_new = sim.info["truth_after"]["K"]
     records = list(run_schedule(OnlineIdentifier(OnlineConfig()), stream(sim.dataset)))
     new = [r for r in records if r.new_estimate]
@@ -377,16 +415,21 @@ def test_a_jump_beyond_its_uncertainty_or_a_worse_free_run_is_held(sim):
     (accepted); a last good estimate equal to the truth is never replaced by a worse free run."""
     from ship_ident.estimators import make_estimator
     from ship_ident.online import _jump
+
     config = OnlineConfig()
     window = sim.dataset.slice(0, 1800)
     structure = config.structure()
     estimate = make_estimator(config.method).fit(structure, window)
     ident = OnlineIdentifier(config)
     truth = replace(estimate, parameters=dict(estimate.parameters, **sim.truth))
-    assert ident._distrust(config, structure, estimate, window, truth) is None or \
-        "misses the window more" in ident._distrust(config, structure, estimate, window, truth)
-    wrong = replace(estimate, parameters=dict(estimate.parameters, K=1.4 * estimate.parameters["K"]),
-                    std_errors=dict(estimate.std_errors, K=1e-4))
+    assert ident._distrust(
+        config, structure, estimate, window, truth
+    ) is None or "misses the window more" in ident._distrust(config, structure, estimate, window, truth)
+    wrong = replace(
+        estimate,
+        parameters=dict(estimate.parameters, K=1.4 * estimate.parameters["K"]),
+        std_errors=dict(estimate.std_errors, K=1e-4),
+    )
     assert _jump(estimate, wrong)[0] > 100
     assert ident._distrust(config, structure, estimate, window, wrong) is None  # its free run is clearly better
     reason = ident._distrust(config, structure, wrong, window, estimate)
@@ -400,11 +443,12 @@ def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
     get standard errors about 60 times larger; a right model's (scatter within its errors) keep theirs."""
     from ship_ident.estimators.base import Estimate
     from ship_ident.online import EstimateScatter
+
     structure = OnlineConfig(model="nomoto1", effects=()).structure()
 
     def estimate(k, end):
-        return Estimate(structure, "x", {"K": k, "T": 50.0}, {"K": 0.001, "T": 1.0}, {}, 100,
-                        window=(end - 180.0, end))
+        return Estimate(structure, "x", {"K": k, "T": 50.0}, {"K": 0.001, "T": 1.0}, {}, 100, window=(end - 180.0, end))
+
     scatter = EstimateScatter()
     for i, k in enumerate([0.10, 0.114, 0.10, 0.114]):
         scatter.add(estimate(k, 180.0 + 5 * i))
@@ -421,6 +465,7 @@ def test_a_well_determined_window_is_used_whatever_its_yaw_rate_spread():
     wanted 5) still determines K and T1, so it gives estimates; a rudder within 0.2 deg does not,
     and the sentence says the rudder hardly moves."""
     from ship_ident.estimators.base import excitation, excitation_shortfall
+
     sim = simulate("random", duration=400.0, seed=8, amplitude=np.radians(3.0))
     ex = excitation(sim.dataset)
     assert ex["yaw_rate_std"] < 5 * ex["yaw_rate_std_needed"] / 2
@@ -440,9 +485,11 @@ def test_a_changed_vessel_is_followed_within_10_s(maneuver):
     manoeuvre holds it amidships until 607.5 s), and K refitted on the new data (T1 refitted or held
     as they allow) is within 5 % of the new value from 10 s on."""
     from ship_ident.bench.peers import dataset_samples, recovery_time
+
     change = 600.0
-    sim = simulate(maneuver, "seed001", duration=2 * change, seed=31,
-                   change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}))
+    sim = simulate(
+        maneuver, "seed001", duration=2 * change, seed=31, change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397})
+    )
     records = list(run_schedule(OnlineIdentifier(OnlineConfig()), dataset_samples(sim.dataset)))
     alarms = [r.time for r in records if "vessel_changed" in r.conditions]
     assert alarms and change < alarms[0] <= change + 10.0

@@ -1,4 +1,5 @@
 """bench peers: quick accuracy and tracking give sane, real numbers for ours and every peer."""
+
 import math
 
 import numpy as np
@@ -51,6 +52,6 @@ def test_tracking_recovers_within_a_window_and_the_peers_track(tracking):
 def test_recovery_time_is_the_last_exit_from_the_band():
     times = np.arange(0.0, 100.0, 10.0)
     settled = np.where(times < 40, 1.0, 0.7)
-    assert peer_experiments.recovery_time(times, settled, 20.0, 0.7) == 20.0   # outside until t = 30, inside from 40
+    assert peer_experiments.recovery_time(times, settled, 20.0, 0.7) == 20.0  # outside until t = 30, inside from 40
     never = np.where(times < 90, 0.7, 1.0)
     assert peer_experiments.recovery_time(times, never, 20.0, 0.7) == math.inf

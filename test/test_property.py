@@ -1,5 +1,6 @@
 """Property tests: random message sequences (values, timings, orders, gaps) against the window and the
 online pipeline. Nothing escapes, every published number is finite, the window keeps its bounds."""
+
 import json
 import math
 
@@ -8,18 +9,27 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ship_ident.jsonio import dumps_json
 from ship_ident.io import ROLES, Sample
+from ship_ident.jsonio import dumps_json
 from ship_ident.online import OnlineConfig, OnlineIdentifier, RefitRecord, run_schedule
 from ship_ident.simulator import simulate
 
-SMALL = OnlineConfig(sample_time=0.1, window_length=10.0, min_window_length=2.0, refit_period=1.0,
-                     max_window_samples=150, method="rwlssvm", gap_threshold=0.5)
+SMALL = OnlineConfig(
+    sample_time=0.1,
+    window_length=10.0,
+    min_window_length=2.0,
+    refit_period=1.0,
+    max_window_samples=150,
+    method="rwlssvm",
+    gap_threshold=0.5,
+)
 
-values = st.one_of(st.floats(-1.0, 1.0), st.floats(allow_nan=True, allow_infinity=True),
-                   st.sampled_from([0.0, math.nan, math.inf, -math.inf, 1e300, 359.0]))
-steps = st.one_of(st.floats(0.0, 0.2), st.floats(-3.0, 0.0), st.floats(0.0, 400.0),
-                  st.just(0.0), st.just(math.nan))
+values = st.one_of(
+    st.floats(-1.0, 1.0),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([0.0, math.nan, math.inf, -math.inf, 1e300, 359.0]),
+)
+steps = st.one_of(st.floats(0.0, 0.2), st.floats(-3.0, 0.0), st.floats(0.0, 400.0), st.just(0.0), st.just(math.nan))
 events = st.lists(st.tuples(steps, st.sampled_from(ROLES + ("refit",)), values), max_size=400)
 
 
@@ -61,14 +71,27 @@ def test_check_published_can_fail():
     """The check itself: a NaN parameter, a NaN fit figure and an OK record without a prediction
     are each refused."""
     good = {"parameters": {"K": 0.5, "T": 2.0}, "fit": {"rmse_yaw_rate": 0.01}}
-    check_published(RefitRecord(time=1.0, conditions={}, estimate=good, window=(0.0, 1.0),
-                                predicted_yaw_rate=0.1, measured_yaw_rate=0.1))
-    for estimate, predicted in ((dict(good, parameters={"K": math.nan, "T": 2.0}), 0.1),
-                                (dict(good, fit={"rmse_yaw_rate": math.nan}), 0.1),
-                                (good, math.nan)):
+    check_published(
+        RefitRecord(
+            time=1.0, conditions={}, estimate=good, window=(0.0, 1.0), predicted_yaw_rate=0.1, measured_yaw_rate=0.1
+        )
+    )
+    for estimate, predicted in (
+        (dict(good, parameters={"K": math.nan, "T": 2.0}), 0.1),
+        (dict(good, fit={"rmse_yaw_rate": math.nan}), 0.1),
+        (good, math.nan),
+    ):
         with pytest.raises(AssertionError):
-            check_published(RefitRecord(time=1.0, conditions={}, estimate=estimate, window=(0.0, 1.0),
-                                        predicted_yaw_rate=predicted, measured_yaw_rate=0.1))
+            check_published(
+                RefitRecord(
+                    time=1.0,
+                    conditions={},
+                    estimate=estimate,
+                    window=(0.0, 1.0),
+                    predicted_yaw_rate=predicted,
+                    measured_yaw_rate=0.1,
+                )
+            )
 
 
 def check_window(identifier: OnlineIdentifier, now: float) -> None:
@@ -94,11 +117,17 @@ def test_random_messages_never_break_the_window(sequence):
                 check_window(identifier, clock)
             clock = clock if math.isfinite(clock) else 0.0
             continue
-        assert identifier.add(Sample(clock, role, value)) in ("accepted", "non_finite", "absurd",
-                                                              "out_of_order", "duplicate")
+        assert identifier.add(Sample(clock, role, value)) in (
+            "accepted",
+            "non_finite",
+            "absurd",
+            "out_of_order",
+            "duplicate",
+        )
         clock = clock if math.isfinite(clock) else 0.0
-    assert sum(identifier.counts[k] for k in ("accepted", "non_finite", "absurd", "out_of_order",
-                                               "duplicate")) == sum(r != "refit" for _, r, _ in sequence)
+    assert sum(identifier.counts[k] for k in ("accepted", "non_finite", "absurd", "out_of_order", "duplicate")) == sum(
+        r != "refit" for _, r, _ in sequence
+    )
 
 
 @pytest.fixture(scope="module")
@@ -106,16 +135,24 @@ def trip():
     """Two minutes of a manoeuvring boat as time-ordered samples, heading wrapped."""
     d = simulate("mixed", duration=120.0, seed=9).dataset
     wrapped = np.mod(d.heading + np.pi, 2 * np.pi) - np.pi
-    return [Sample(float(t), role, float(v)) for i, t in enumerate(d.time)
-            for role, v in (("rudder", d.rudder[i]), ("heading", wrapped[i]), ("yaw_rate", d.yaw_rate[i]))]
+    return [
+        Sample(float(t), role, float(v))
+        for i, t in enumerate(d.time)
+        for role, v in (("rudder", d.rudder[i]), ("heading", wrapped[i]), ("yaw_rate", d.yaw_rate[i]))
+    ]
 
 
-glitch = st.tuples(st.sampled_from(["drop", "duplicate", "swap", "nan", "spike", "shift"]),
-                   st.floats(0.0, 1.0), st.floats(0.0, 0.2), st.floats(-100.0, 100.0))
+glitch = st.tuples(
+    st.sampled_from(["drop", "duplicate", "swap", "nan", "spike", "shift"]),
+    st.floats(0.0, 1.0),
+    st.floats(0.0, 0.2),
+    st.floats(-100.0, 100.0),
+)
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                 HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+)
 @given(st.lists(glitch, max_size=6))
 def test_glitched_trip_through_the_pipeline(trip, glitches):
     """Drops, duplicates, reorderings, NaN bursts, spikes and clock shifts over a real trip."""
@@ -135,8 +172,7 @@ def test_glitched_trip_through_the_pipeline(trip, glitches):
             samples[a:b] = [Sample(s.time, s.role, s.value * size) for s in samples[a:b]]
         else:
             samples[a:] = [Sample(s.time + size, s.role, s.value) for s in samples[a:]]
-    identifier = OnlineIdentifier(OnlineConfig(window_length=40.0, min_window_length=20.0,
-                                               refit_period=10.0))
+    identifier = OnlineIdentifier(OnlineConfig(window_length=40.0, min_window_length=20.0, refit_period=10.0))
     for record in run_schedule(identifier, samples):
         check_published(record)
         check_window(identifier, record.time)

@@ -1,16 +1,17 @@
 """The bad-input catalogue of docs/reliability.md: replay's one-line errors, heading wraps, and that
 every test the catalogue names exists."""
+
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from test_io import BAD_INPUTS, make_bad_input, written  # noqa: F401  (fixture)
 
 from ship_ident.cli import main
 from ship_ident.io import Sample
 from ship_ident.online import OnlineConfig, OnlineIdentifier, run_schedule
 from ship_ident.simulator import simulate
-from test_io import BAD_INPUTS, make_bad_input, written  # noqa: F401  (fixture)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -29,11 +30,20 @@ def test_heading_wrapping_through_pi_both_ways_is_plausible(direction):
     d = simulate("turning", duration=150.0, seed=1).dataset
     wrapped = np.mod(direction * d.heading + np.pi, 2 * np.pi) - np.pi
     assert np.sum(np.abs(np.diff(wrapped)) > np.pi) >= 2
-    samples = [Sample(float(t), role, float(v)) for i, t in enumerate(d.time)
-               for role, v in (("rudder", direction * d.rudder[i]), ("heading", wrapped[i]),
-                               ("yaw_rate", direction * d.yaw_rate[i]))]
-    records = list(run_schedule(OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0,
-                                                              method="rwlssvm")), samples))
+    samples = [
+        Sample(float(t), role, float(v))
+        for i, t in enumerate(d.time)
+        for role, v in (
+            ("rudder", direction * d.rudder[i]),
+            ("heading", wrapped[i]),
+            ("yaw_rate", direction * d.yaw_rate[i]),
+        )
+    ]
+    records = list(
+        run_schedule(
+            OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0, method="rwlssvm")), samples
+        )
+    )
     seen = {c for r in records for c in r.conditions}
     assert not seen & {"heading_in_degrees", "yaw_rate_sign", "rejected_samples", "clock_jump"}
 

@@ -1,4 +1,5 @@
 """ship-ident replay: a simulated bag through the online identifier, JSON lines and the --out MCAP."""
+
 import json
 import math
 import signal
@@ -17,8 +18,9 @@ from ship_ident.simulator import simulate
 
 
 def replay(*args):
-    return subprocess.run([sys.executable, "-m", "ship_ident.cli", "replay", *map(str, args)],
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "ship_ident.cli", "replay", *map(str, args)], capture_output=True, text=True, timeout=120
+    )
 
 
 @pytest.fixture(scope="module")
@@ -52,25 +54,35 @@ def test_replay_out_mcap_reads_back_with_estimates(bag, tmp_path):
     assert "real time" in result.stdout and "K =" in result.stdout
     with AnyReader([out], default_typestore=typestore()) as reader:
         topics = {c.topic for c in reader.connections}
-        assert {"/usv/rudder", "/usv/heading", "/usv/yaw_rate", "/ship_ident/estimate",
-                "/ship_ident/parameters"} <= topics
-        estimates = [json.loads(reader.deserialize(raw, c.msgtype).data)
-                     for c, _, raw in reader.messages([c for c in reader.connections
-                                                       if c.topic == "/ship_ident/estimate"])]
-        parameters = [reader.deserialize(raw, c.msgtype)
-                      for c, _, raw in reader.messages([c for c in reader.connections
-                                                        if c.topic == "/ship_ident/parameters"])]
+        assert {
+            "/usv/rudder",
+            "/usv/heading",
+            "/usv/yaw_rate",
+            "/ship_ident/estimate",
+            "/ship_ident/parameters",
+        } <= topics
+        estimates = [
+            json.loads(reader.deserialize(raw, c.msgtype).data)
+            for c, _, raw in reader.messages([c for c in reader.connections if c.topic == "/ship_ident/estimate"])
+        ]
+        parameters = [
+            reader.deserialize(raw, c.msgtype)
+            for c, _, raw in reader.messages([c for c in reader.connections if c.topic == "/ship_ident/parameters"])
+        ]
     assert len(estimates) == 30  # every 10 s of 0 .. 300 s
     assert estimates[-1]["structure"]["effects"] == ["rudder_offset"]
     assert parameters[-1].layout.dim[0].label == "K,T1,T2,T3,delta_r"
     assert parameters[-1].data[0] == pytest.approx(truth["K"], rel=0.05)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["/nonexistent/bag.mcap"], "does not exist"),
-    (["{bag}", "--effects", "barnacles"], "unknown effect"),
-    (["{bag}", "--window-length", "-5"], "window_length"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["/nonexistent/bag.mcap"], "does not exist"),
+        (["{bag}", "--effects", "barnacles"], "unknown effect"),
+        (["{bag}", "--window-length", "-5"], "window_length"),
+    ],
+)
 def test_replay_bad_input_is_one_line(bag, args, message):
     result = replay(*[a.format(bag=bag[0]) for a in args])
     assert result.returncode == 2
@@ -80,8 +92,7 @@ def test_replay_bad_input_is_one_line(bag, args, message):
 def estimates_in(path) -> list[dict]:
     with AnyReader([path], default_typestore=typestore()) as reader:
         connections = [c for c in reader.connections if c.topic == "/ship_ident/estimate"]
-        return [json.loads(reader.deserialize(raw, c.msgtype).data)
-                for c, _, raw in reader.messages(connections)]
+        return [json.loads(reader.deserialize(raw, c.msgtype).data) for c, _, raw in reader.messages(connections)]
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
@@ -89,9 +100,23 @@ def test_interrupted_replay_leaves_a_readable_mcap_with_every_estimate(tmp_path,
     out = tmp_path / "partial.mcap"
     # unbuffered: readline takes exactly one line from the pipe, so communicate() gets the rest
     # (a buffered reader may hold the next lines where communicate, reading the pipe, misses them)
-    process = subprocess.Popen([sys.executable, "-m", "ship_ident.cli", "replay", str(DEMO_BAG), "--json",
-                                "--out", str(out), "--refit-period", "1.0"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "ship_ident.cli",
+            "replay",
+            str(DEMO_BAG),
+            "--json",
+            "--out",
+            str(out),
+            "--refit-period",
+            "1.0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        bufsize=0,
+    )
     try:
         printed = [json.loads(process.stdout.readline()) for _ in range(20)]
         process.send_signal(signum)
@@ -117,18 +142,30 @@ def test_replay_bag_is_callable_per_bag(bag):
     assert result.records[-1].estimate["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)
 
 
-KVLCC2_ZIGZAG = Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2_marin" / \
-    "MARIN_FREE_KVLCC2_zz_20_m.csv"
+KVLCC2_ZIGZAG = (
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2_marin" / "MARIN_FREE_KVLCC2_zz_20_m.csv"
+)
 
 
-@pytest.mark.skipif(not KVLCC2_ZIGZAG.exists(), reason="kvlcc2_marin: measured MARIN model tests, "
-                                                        "not shipped with the package")
+@pytest.mark.skipif(
+    not KVLCC2_ZIGZAG.exists(), reason="kvlcc2_marin: measured MARIN model tests, not shipped with the package"
+)
 def test_kvlcc2_zigzag_uncertainty_covers_the_scatter_and_is_not_saturated():
     """The measured 20/20 zigzag of a slow ship: successive published K within 3 joint standard
     errors of each other (they were 12-19 apart), no rudder_saturated for the zigzag's +-20 deg,
     and a 1 s sample time runs (the gap threshold follows it)."""
-    args = [KVLCC2_ZIGZAG, "--json", "--model", "nomoto1", "--effects", "cubic_yaw", "--window-length", 400,
-            "--refit-period", 20]
+    args = [
+        KVLCC2_ZIGZAG,
+        "--json",
+        "--model",
+        "nomoto1",
+        "--effects",
+        "cubic_yaw",
+        "--window-length",
+        400,
+        "--refit-period",
+        20,
+    ]
     out = replay(*args, "--sample-time", 0.5)
     assert out.returncode == 0, out.stderr
     records = [json.loads(line) for line in out.stdout.splitlines()]

@@ -1,4 +1,5 @@
 """The diagnosis report: every picture is written, referenced and rendered by a headless browser."""
+
 import re
 import shutil
 import subprocess
@@ -32,7 +33,7 @@ def test_report_writes_and_references_every_png(report):
         path = report.parent / name
         assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "Verdict" in html and "free run" in html
-    assert re.search(r"Verdict: (adequate|missing_effect|unexplained)</b>: \w", html)   # and its sentence
+    assert re.search(r"Verdict: (adequate|missing_effect|unexplained)</b>: \w", html)  # and its sentence
     # the worst segments name their recording, held-out ones included
     assert "simulate:random (training)" in html and "simulate:random (held out)" in html
 
@@ -42,8 +43,23 @@ def test_report_renders_in_headless_chromium(report, tmp_path):
     check = report.parent / "check.html"
     check.write_text(report.read_text().replace("</body>", CHECK))
     out = subprocess.run(
-        [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=10000", "--dump-dom",
-         check.as_uri()], capture_output=True, text=True, timeout=120)
+        [
+            CHROMIUM,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--virtual-time-budget=10000",
+            "--dump-dom",
+            check.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert 'data-images="6/6"' in out.stdout, out.stderr[-2000:]

@@ -1,23 +1,23 @@
 """Soak and load: the node fed 100 Hz on each input for 10 minutes of simulated time, as fast as
 it keeps up (paced /clock), over real DDS. Figures are printed (``pytest -s``); docs/reliability.md."""
+
 import math
 import subprocess
 import time
 
 import numpy as np
 import pytest
+from test_node import domain_id, env  # noqa: F401  (fixtures)
 
 from ship_ident.commands.play import Player
 from ship_ident.demo import Listener, shut_down, start_node
 from ship_ident.simulator import simulate
 
-from test_node import domain_id, env  # noqa: F401  (fixtures)
-
-SIM_SECONDS = 600.0      # s of simulated time
-INPUT_RATE = 100.0       # Hz on each of rudder, heading, yaw rate
-PACE = 8.0               # x real time: 2400 data messages/s plus 800 /clock messages/s
-WARM_UP = 250.0          # s of simulated time: window full, compiled code loaded
-REFIT_PERIOD = 5.0       # s
+SIM_SECONDS = 600.0  # s of simulated time
+INPUT_RATE = 100.0  # Hz on each of rudder, heading, yaw rate
+PACE = 8.0  # x real time: 2400 data messages/s plus 800 /clock messages/s
+WARM_UP = 250.0  # s of simulated time: window full, compiled code loaded
+REFIT_PERIOD = 5.0  # s
 
 
 def rss_mib(pid: int) -> float:
@@ -29,8 +29,7 @@ def rss_mib(pid: int) -> float:
 def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: F811
     d = simulate("mixed", duration=SIM_SECONDS, seed=11, sample_time=1.0 / INPUT_RATE).dataset
     heading = np.mod(d.heading + np.pi, 2 * np.pi) - np.pi
-    node = start_node(env, "use_sim_time:=true", stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                      text=True)
+    node = start_node(env, "use_sim_time:=true", stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     listener = Listener(domain_id)
     player = Player(listener.node)
     rss = {}
@@ -65,19 +64,25 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
     latency = np.array([r["compute_seconds"] for r in records if r["new_estimate"]])
     overran = sum("refit_overran" in r["conditions"] for r in records)
     figures = {
-        "simulated_s": SIM_SECONDS, "wall_s": wall, "x_real_time": SIM_SECONDS / wall,
+        "simulated_s": SIM_SECONDS,
+        "wall_s": wall,
+        "x_real_time": SIM_SECONDS / wall,
         "data_messages_per_s_sent": sent / wall,
         "accepted_per_s": counts["accepted"] / wall,
-        "accepted_share": counts["accepted"] / sent, "duplicate_share": counts["duplicate"] / sent,
+        "accepted_share": counts["accepted"] / sent,
+        "duplicate_share": counts["duplicate"] / sent,
         "lost_share": 1 - sum(counts[k] for k in ("accepted", "duplicate", "out_of_order")) / sent,
-        "rss_warm_mib": rss["warm"], "rss_end_mib": rss["end"],
-        "refits": len(records), "new_estimates": int(len(latency)), "overran": overran,
+        "rss_warm_mib": rss["warm"],
+        "rss_end_mib": rss["end"],
+        "refits": len(records),
+        "new_estimates": int(len(latency)),
+        "overran": overran,
         "period_kept_share": float(np.mean(np.isclose(intervals, REFIT_PERIOD, atol=0.1))),
         "refit_ms_p50_p95_p99_max": [round(1000 * v, 1) for v in np.percentile(latency, [50, 95, 99, 100])],
     }
     print("\nsoak figures:", figures)
-    assert rss["end"] - rss["warm"] < 30.0                      # flat after warm-up
-    assert figures["accepted_share"] > 0.5                      # most messages used
-    assert stamps[-1] >= SIM_SECONDS - 2 * REFIT_PERIOD         # no backlog at the end
+    assert rss["end"] - rss["warm"] < 30.0  # flat after warm-up
+    assert figures["accepted_share"] > 0.5  # most messages used
+    assert stamps[-1] >= SIM_SECONDS - 2 * REFIT_PERIOD  # no backlog at the end
     assert figures["period_kept_share"] >= 0.9 and len(records) >= 0.9 * SIM_SECONDS / REFIT_PERIOD
     assert len(latency) >= 0.5 * len(records) and math.isfinite(latency.max())

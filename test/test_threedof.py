@@ -1,5 +1,6 @@
 """3-DOF manoeuvring model: simulator, identification, free-run prediction, training-size bench, KVLCC2,
 and the command line (simulate, identify, compare --model 3dof)."""
+
 import contextlib
 import io
 import json
@@ -13,15 +14,22 @@ from ship_ident.bench import training_size
 from ship_ident.cli import main
 
 DTC = threedof.VESSELS["dtc"]
-PROGRAMME = (("zigzag", 10, 100), ("zigzag", 20, 100), ("turning", 35, 120), ("zigzag", -15, 100),
-             ("turning", -25, 120))
+PROGRAMME = (
+    ("zigzag", 10, 100),
+    ("zigzag", 20, 100),
+    ("turning", 35, 120),
+    ("zigzag", -15, 100),
+    ("turning", -25, 120),
+)
 KVLCC2_RAW = Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2_marin" / "raw"
 LINEAR_YN = ("v", "r", "d")
 
 
 def _programme(noise):
-    return [threedof.simulate_manoeuvre(DTC, m, a, duration=d, noise=noise, seed=i)[0]
-            for i, (m, a, d) in enumerate(PROGRAMME)]
+    return [
+        threedof.simulate_manoeuvre(DTC, m, a, duration=d, noise=noise, seed=i)[0]
+        for i, (m, a, d) in enumerate(PROGRAMME)
+    ]
 
 
 def _relative_errors(estimate, truth, dof):
@@ -32,8 +40,12 @@ def _relative_errors(estimate, truth, dof):
 
 def test_free_run_of_true_model_reproduces_the_simulation():
     _, truth = threedof.simulate_manoeuvre(DTC, "turning", 35, duration=60, noise=0.0)
-    rerun = threedof.run_model(DTC.coefficients(), truth.time, truth.rudder,
-                               (truth.surge[0], truth.sway[0], truth.yaw_rate[0], truth.heading[0]))
+    rerun = threedof.run_model(
+        DTC.coefficients(),
+        truth.time,
+        truth.rudder,
+        (truth.surge[0], truth.sway[0], truth.yaw_rate[0], truth.heading[0]),
+    )
     for dof in threedof.DOFS:
         assert np.max(np.abs(rerun.dof(dof) - truth.dof(dof))) < 1e-12
 
@@ -107,8 +119,10 @@ def test_training_size_quick_run_improves_with_set_size(tmp_path):
 def kvlcc2():
     if not KVLCC2_RAW.is_dir():
         pytest.skip(f"KVLCC2 MARIN raw data not found at {KVLCC2_RAW} (shared data set absent)")
-    return {name: threedof.load_marin_raw(str(KVLCC2_RAW / f"MARIN_FREE_KVLCC2_{name}_m.dat"))
-            for name in ("zz_10", "zz_20", "zz_-20")}
+    return {
+        name: threedof.load_marin_raw(str(KVLCC2_RAW / f"MARIN_FREE_KVLCC2_{name}_m.dat"))
+        for name in ("zz_10", "zz_20", "zz_-20")
+    }
 
 
 def test_kvlcc2_loader_rotates_velocities_and_flips_rudder(kvlcc2):
@@ -117,11 +131,11 @@ def test_kvlcc2_loader_rotates_velocities_and_flips_rudder(kvlcc2):
     assert zz10.sample_time == pytest.approx(0.135264, rel=1e-4)
     assert threedof.approach_speed(zz10) == pytest.approx(7.97, abs=0.05)
     drift = np.degrees(np.arctan2(zz10.sway, zz10.surge))
-    assert np.sqrt(np.mean(drift ** 2)) < 8.0   # body-fixed drift angle stays small
+    assert np.sqrt(np.mean(drift**2)) < 8.0  # body-fixed drift angle stays small
     assert zz10.surge.min() > 6.5
     execute = np.flatnonzero(np.abs(zz10.rudder - zz10.rudder[0]) > np.radians(1.0))[0]
-    assert zz10.rudder[execute + 50] < 0        # the run starts to port ...
-    assert zz10.yaw_rate[execute + 200] < 0     # ... and turns to port
+    assert zz10.rudder[execute + 50] < 0  # the run starts to port ...
+    assert zz10.yaw_rate[execute + 200] < 0  # ... and turns to port
     assert np.allclose(zz10.propeller_rate, 91.7 / 60, rtol=0.02)
 
 
@@ -157,9 +171,23 @@ def cli_programme(tmp_path_factory):
     paths = {"csv": [], "bag": []}
     for seed, (manoeuvre, duration) in enumerate(CLI_PROGRAMME):
         for kind, name in (("csv", f"{manoeuvre}.csv"), ("bag", f"{manoeuvre}.mcap" if seed else manoeuvre)):
-            code, out = run_cli("simulate", "--model", "3dof", "--maneuver", manoeuvre, "--duration", duration,
-                                "--noise", "0", "--seed", seed, "--out", folder / name,
-                                "--truth-out", folder / "truth.json")
+            code, out = run_cli(
+                "simulate",
+                "--model",
+                "3dof",
+                "--maneuver",
+                manoeuvre,
+                "--duration",
+                duration,
+                "--noise",
+                "0",
+                "--seed",
+                seed,
+                "--out",
+                folder / name,
+                "--truth-out",
+                folder / "truth.json",
+            )
             assert code == 0 and "3dof dtc" in out
             paths[kind].append(folder / name)
     return paths, folder / "truth.json"
@@ -181,8 +209,10 @@ def test_identify_3dof_on_the_command_line_recovers_the_coefficients(cli_program
     assert record["structure"] == {"model": "3dof", "effects": []} and record["method"] == "ols"
     assert record["samples"] == 1001 + 1001 + 1201
     for dof in threedof.DOFS:
-        errors = {t: abs(record["coefficients"][dof][t]["value"] - v["value"]) / abs(v["value"])
-                  for t, v in truth[dof].items()}
+        errors = {
+            t: abs(record["coefficients"][dof][t]["value"] - v["value"]) / abs(v["value"])
+            for t, v in truth[dof].items()
+        }
         main_terms = ("u", "vv", "rv", "dd") if dof == "surge" else LINEAR_YN + ("vvv", "vvr", "ddd")
         assert max(errors[t] for t in main_terms) < 0.01, (dof, errors)
         assert max(e for t, e in errors.items() if t not in SMALL_TERMS) < 0.05, (dof, errors)
@@ -202,8 +232,9 @@ def test_csv_and_bag_give_the_same_3dof_model(cli_programme):
 def test_compare_runs_a_3dof_model_file_free(cli_programme, tmp_path):
     paths, truth_file = cli_programme
     model = tmp_path / "model.json"
-    code, _ = run_cli("identify", "--model", "3dof", *paths["csv"][:2], "--length", DTC.length,
-                      "--method", "ols", "--save", model)
+    code, _ = run_cli(
+        "identify", "--model", "3dof", *paths["csv"][:2], "--length", DTC.length, "--method", "ols", "--save", model
+    )
     assert code == 0
     for model_file in (model, truth_file):
         code, out = run_cli("compare", model_file, paths["bag"][2], "--json")
@@ -217,7 +248,9 @@ def test_compare_runs_a_3dof_model_file_free(cli_programme, tmp_path):
 def test_bad_3dof_input_is_one_line_and_exit_2(cli_programme, tmp_path):
     paths, _ = cli_programme
     nomoto_csv = tmp_path / "nomoto.csv"
-    nomoto_csv.write_text("t,rudder,heading,yaw_rate,speed\n" + "".join(f"{i / 10},0.1,0.0,0.0,1.0\n" for i in range(100)))
+    nomoto_csv.write_text(
+        "t,rudder,heading,yaw_rate,speed\n" + "".join(f"{i / 10},0.1,0.0,0.0,1.0\n" for i in range(100))
+    )
     nomoto_bag = tmp_path / "nomoto.mcap"
     assert run_cli("simulate", "--maneuver", "zigzag20", "--duration", "60", "--out", nomoto_bag)[0] == 0
     csv = paths["csv"][0]
@@ -228,12 +261,16 @@ def test_bad_3dof_input_is_one_line_and_exit_2(cli_programme, tmp_path):
         (("identify", "--model", "3dof", csv, "--length", "4", "--truncation", "magic"), "invalid choice"),
         (("identify", "--model", "3dof", nomoto_csv, "--length", "4"), "no column for surge, sway"),
         (("identify", "--model", "3dof", nomoto_bag, "--length", "4"), "has no topic /usv/velocity"),
-        (("identify", "--model", "3dof", nomoto_bag, "--length", "4", "--velocity-topic", "/usv/rudder"),
-         "expected nav_msgs/msg/Odometry or geometry_msgs/msg/TwistStamped"),
+        (
+            ("identify", "--model", "3dof", nomoto_bag, "--length", "4", "--velocity-topic", "/usv/rudder"),
+            "expected nav_msgs/msg/Odometry or geometry_msgs/msg/TwistStamped",
+        ),
         (("identify", csv, "--columns", "sway=sway_speed"), "this model reads no sway"),
         (("simulate", "--model", "3dof", "--maneuver", "random", "--out", tmp_path / "x.csv"), "zigzag10"),
-        (("simulate", "--model", "3dof", "--vessel", "kvlcc2", "--maneuver", "turning", "--out", tmp_path / "x.csv"),
-         "vessel dtc"),
+        (
+            ("simulate", "--model", "3dof", "--vessel", "kvlcc2", "--maneuver", "turning", "--out", tmp_path / "x.csv"),
+            "vessel dtc",
+        ),
         (("diagnose", csv, "--model", "3dof"), "invalid choice"),
     ]
     for args, words in cases:

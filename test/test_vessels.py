@@ -1,5 +1,6 @@
 """Randomised vessels: the simulator's manoeuvres and vessel draws, fits that converge on any
 vessel, and a small fixed-seed sample of ``ship-ident bench vessels`` judged against the truth."""
+
 import numpy as np
 import pytest
 
@@ -34,10 +35,10 @@ def test_cubic_yaw_is_bounded_by_the_turn_rates_of_the_data():
     sim = simulate("steps", "seed001", duration=120.0, seed=3)
     r_max = np.max(np.abs(sim.dataset.yaw_rate))
     lower, upper = STRUCTURE.bounds(["K", "alpha"], sim.dataset)
-    assert lower[1] == pytest.approx(-1.0 / (3.0 * r_max ** 2))
-    assert lower[1] < sim.truth["alpha"]          # seed 001's own negative alpha stays inside
+    assert lower[1] == pytest.approx(-1.0 / (3.0 * r_max**2))
+    assert lower[1] < sim.truth["alpha"]  # seed 001's own negative alpha stays inside
     assert upper[1] == EFFECTS["cubic_yaw"].parameters[0].upper
-    assert lower[0] == STRUCTURE.parameter("K").lower   # the other bounds are the physical ones
+    assert lower[0] == STRUCTURE.parameter("K").lower  # the other bounds are the physical ones
 
 
 def test_pem_fit_converges_where_t3_nearly_cancels_t2():
@@ -52,7 +53,7 @@ def test_pem_fit_converges_where_t3_nearly_cancels_t2():
     assert estimate.ok and not estimate.flags, estimate.flags
     assert abs(estimate.parameters["K"] / truth["K"] - 1) < 0.01
     assert abs(estimate.parameters["T1"] / truth["T1"] - 1) < 0.03
-    assert estimate.info["iterations"] > 30    # the first 30 iterations did not converge
+    assert estimate.info["iterations"] > 30  # the first 30 iterations did not converge
 
 
 def test_ship_configuration_follows_the_hull():
@@ -77,6 +78,12 @@ def test_bench_vessels_fixed_seed_sample_against_the_truth():
     assert summary["coverage"]["K"] > 0.8
     assert summary["recovery"]["worst_s"] <= step["window_s"] + step["refit_period_s"]
     assert summary["false_changes_per_hour"] == 0.0
-    text = vessels.render({"summary": summary, "cases": [vessels._brief(c) for c in cases],
-                           "well_excited_crb": vessels.WELL_EXCITED, "seed": 1000})
+    text = vessels.render(
+        {
+            "summary": summary,
+            "cases": [vessels._brief(c) for c in cases],
+            "well_excited_crb": vessels.WELL_EXCITED,
+            "seed": 1000,
+        }
+    )
     assert "seed 1007 usv(" in text and "95 % coverage" in text

@@ -8,13 +8,14 @@ JSON-ready result; progress goes to stderr) and ``render(result) -> str``
 --plot-dir DIR``). ``benchmarks()`` imports every module here, so adding a
 benchmark means adding one module and nothing else.
 """
+
 from __future__ import annotations
 
 import importlib
 import pkgutil
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -33,8 +34,14 @@ _REGISTRY: dict[str, Benchmark] = {}
 HELPERS = {"crb", "common", "peer_models", "peer_experiments", "peer_rendering"}  # modules here that are no benchmark
 
 
-def register(name: str, description: str, run: Callable[..., dict], render: Callable[[dict], str],
-             plots: bool = False, randomised: bool = False) -> None:
+def register(
+    name: str,
+    description: str,
+    run: Callable[..., dict],
+    render: Callable[[dict], str],
+    plots: bool = False,
+    randomised: bool = False,
+) -> None:
     _REGISTRY[name] = Benchmark(name, description, run, render, plots, randomised)
 
 

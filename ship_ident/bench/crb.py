@@ -28,6 +28,7 @@ noise's own spectrum (a few percent of the total here), by Whittle's
 frequency-domain formula. This is the bound for the records the estimators
 actually get; the known-rudder bound is lower and unattainable with them.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -40,8 +41,9 @@ from ..structure import Structure
 NOISE_SHAPING = ("K", "T", "T1", "T2", "T3")  # the parameters the linearised noise model depends on
 
 
-def output_sensitivities(structure: Structure, truth: dict, dataset: Dataset, initial: list,
-                         relative_step: float = 1e-5) -> tuple[np.ndarray, list[str]]:
+def output_sensitivities(
+    structure: Structure, truth: dict, dataset: Dataset, initial: list, relative_step: float = 1e-5
+) -> tuple[np.ndarray, list[str]]:
     """Stacked [d psi; d r] / d theta (2N x (p + 3 per segment)) and the names of theta's entries."""
     names = list(structure.free_names)
     columns = []
@@ -77,18 +79,30 @@ def _noise_models(structure: Structure, truth: dict, dataset: Dataset, noise: tu
     for name in structure.free_names:
         if name in NOISE_SHAPING:
             step = 1e-5 * abs(truth[name])
-            slopes.append((model(dict(truth, **{name: truth[name] + step})),
-                           model(dict(truth, **{name: truth[name] - step})), 2 * step))
+            slopes.append(
+                (
+                    model(dict(truth, **{name: truth[name] + step})),
+                    model(dict(truth, **{name: truth[name] - step})),
+                    2 * step,
+                )
+            )
     return model(truth), slopes
 
 
-def fisher_information(structure: Structure, truth: dict, dataset: Dataset, initial: list,
-                       heading_noise: float, yaw_rate_noise: float, rudder_noise: float = 0.0) -> tuple:
+def fisher_information(
+    structure: Structure,
+    truth: dict,
+    dataset: Dataset,
+    initial: list,
+    heading_noise: float,
+    yaw_rate_noise: float,
+    rudder_noise: float = 0.0,
+) -> tuple:
     """Fisher information of theta (free parameters, then the initial states) and theta's names."""
     S, names = output_sensitivities(structure, truth, dataset, initial)
     n = dataset.n_samples
     if rudder_noise == 0.0:
-        weights = np.concatenate([np.full(n, 1 / heading_noise ** 2), np.full(n, 1 / yaw_rate_noise ** 2)])
+        weights = np.concatenate([np.full(n, 1 / heading_noise**2), np.full(n, 1 / yaw_rate_noise**2)])
         return S.T @ (S * weights[:, None]), names
     model, slopes = _noise_models(structure, truth, dataset, (rudder_noise, heading_noise, yaw_rate_noise))
     kalman = innovation_filter(model)
@@ -104,12 +118,18 @@ def fisher_information(structure: Structure, truth: dict, dataset: Dataset, init
     return fisher, names
 
 
-def cramer_rao_bound(structure: Structure, truth: dict, dataset: Dataset, initial: list,
-                     heading_noise: float, yaw_rate_noise: float, rudder_noise: float = 0.0) -> dict:
+def cramer_rao_bound(
+    structure: Structure,
+    truth: dict,
+    dataset: Dataset,
+    initial: list,
+    heading_noise: float,
+    yaw_rate_noise: float,
+    rudder_noise: float = 0.0,
+) -> dict:
     """Lower bounds on the std (SI units) of every free parameter and of ``T1+T2-T3`` (nomoto2);
     ``dataset`` carries the true rudder (the sensitivities), ``rudder_noise`` its sensor noise."""
-    fisher, names = fisher_information(structure, truth, dataset, initial, heading_noise, yaw_rate_noise,
-                                       rudder_noise)
+    fisher, names = fisher_information(structure, truth, dataset, initial, heading_noise, yaw_rate_noise, rudder_noise)
     cov = np.linalg.inv(fisher)
     p = len(structure.free_names)
     bound = {name: float(np.sqrt(cov[i, i])) for i, name in enumerate(structure.free_names)}

@@ -12,6 +12,7 @@ heading and yaw rate, as ``improvement``); for a pair, at least half of what the
 removes (the diagnosis adds one effect per round). On the none cases the share of ``missing_effect``
 verdicts is the false alarm rate. Seeds are drawn fresh each run and printed.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,12 +24,12 @@ from ..structure import Structure
 from . import progress, register
 from .common import table
 
-FAIR_SHARE = 0.5                # the true structure must remove this share of the held-out error
-FIXED_SHARE = 0.5               # the top candidate must remove this share to count as fixed
+FAIR_SHARE = 0.5  # the true structure must remove this share of the held-out error
+FIXED_SHARE = 0.5  # the top candidate must remove this share to count as fixed
 MANOEUVRES = ("zigzag10", "zigzag20", "random", "mixed")
 DURATION_S = {"usv": 600.0, "ship": 2400.0}
-SAMPLE_TIME_S = {"usv": 0.1, "ship": 0.5}   # a slow ship's log needs no 10 Hz (KVLCC2 is fitted at 1 s)
-PAIR_SHARE = 0.15               # share of the cases that hide a pair
+SAMPLE_TIME_S = {"usv": 0.1, "ship": 0.5}  # a slow ship's log needs no 10 Hz (KVLCC2 is fitted at 1 s)
+PAIR_SHARE = 0.15  # share of the cases that hide a pair
 
 
 def strength(effect: str, vessel, rng: np.random.Generator) -> dict:
@@ -40,13 +41,17 @@ def strength(effect: str, vessel, rng: np.random.Generator) -> dict:
     if effect == "rudder_offset":
         return {"delta_r": sign * np.radians(rng.uniform(1.5, 3.0))}
     if effect == "cubic_yaw":
-        return {"alpha": rng.uniform(0.4, 0.8) / r0 ** 2}
+        return {"alpha": rng.uniform(0.4, 0.8) / r0**2}
     if effect == "rudder_delay":
         return {"tau": float(min(5.0, rng.uniform(0.2, 0.5) * p["T1"]))}
     if effect == "wind_yaw":
         amplitude, direction = p["K"] * np.radians(rng.uniform(2.0, 4.0)), rng.uniform(0, 2 * np.pi)
-        return {"wind_c1": amplitude * np.cos(direction), "wind_s1": amplitude * np.sin(direction),
-                "wind_c2": 0.3 * amplitude * np.sin(direction), "wind_s2": 0.0}
+        return {
+            "wind_c1": amplitude * np.cos(direction),
+            "wind_s1": amplitude * np.sin(direction),
+            "wind_c2": 0.3 * amplitude * np.sin(direction),
+            "wind_s2": 0.0,
+        }
     if effect == "gyro_bias":
         return {"r_bias": sign * np.radians(rng.uniform(0.3, 0.6))}
     if effect == "speed_dependence":
@@ -70,18 +75,33 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
     truth = {}
     for effect in hidden:
         truth.update(strength(effect, vessel, rng))
-    sim = simulate(manoeuvre, vessel, effects=hidden, parameters=truth, duration=DURATION_S[kind],
-                   sample_time=SAMPLE_TIME_S[kind], seed=seed)
+    sim = simulate(
+        manoeuvre,
+        vessel,
+        effects=hidden,
+        parameters=truth,
+        duration=DURATION_S[kind],
+        sample_time=SAMPLE_TIME_S[kind],
+        seed=seed,
+    )
     result = diagnose(sim.dataset, "nomoto2", (), workers=1)
     top = result.candidates[0]
-    row = {"seed": seed, "vessel": vessel.name, "manoeuvre": manoeuvre, "hidden": "+".join(hidden) or "none",
-           "verdict": result.verdict, "top": top.effect, "top_improvement": top.improvement}
+    row = {
+        "seed": seed,
+        "vessel": vessel.name,
+        "manoeuvre": manoeuvre,
+        "hidden": "+".join(hidden) or "none",
+        "verdict": result.verdict,
+        "top": top.effect,
+        "top_improvement": top.improvement,
+    }
     if hidden:
         true_fit = _fit(Structure("nomoto2", hidden), result.training, DEFAULT_METHOD, result.estimate.parameters)
         true_run = free_run(true_fit.structure, true_fit.parameters, result.held_out)
         row["true_improvement"] = max(
             _improvement(result.run.fit["rmse_heading"], true_run.fit["rmse_heading"]),
-            _improvement(result.run.fit["rmse_yaw_rate"], true_run.fit["rmse_yaw_rate"]))
+            _improvement(result.run.fit["rmse_yaw_rate"], true_run.fit["rmse_yaw_rate"]),
+        )
         row["fair"] = bool(row["true_improvement"] >= FAIR_SHARE)
         row["named_first"] = top.effect in hidden
         needed = FIXED_SHARE * (row["true_improvement"] if len(hidden) > 1 else 1.0)
@@ -102,11 +122,13 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
             hidden = tuple(sorted((names[pair[0]], names[pair[1]])))
         else:
             hidden = (names[k % (len(names) + 1)],)
-        case_seed = int(rng.integers(2 ** 31))
+        case_seed = int(rng.integers(2**31))
         row = run_case(case_seed, hidden)
-        progress(f"hidden-effects {k + 1}/{count}: {row['hidden']} on {row['vessel']} ({row['manoeuvre']}, "
-                 f"seed {case_seed}): top {row['top']} {100 * row['top_improvement']:.0f} %, {row['verdict']}"
-                 + (f", true fit {100 * row['true_improvement']:.0f} %" if "true_improvement" in row else ""))
+        progress(
+            f"hidden-effects {k + 1}/{count}: {row['hidden']} on {row['vessel']} ({row['manoeuvre']}, "
+            f"seed {case_seed}): top {row['top']} {100 * row['top_improvement']:.0f} %, {row['verdict']}"
+            + (f", true fit {100 * row['true_improvement']:.0f} %" if "true_improvement" in row else "")
+        )
         rows.append(row)
     fair = [r for r in rows if r.get("fair")]
     none = [r for r in rows if r["hidden"] == "none"]
@@ -116,27 +138,46 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
         entry["fair"] += 1
         entry["named_first"] += r["named_first"]
         entry["fixed"] += r["fixed"]
-    return {"seed": seed, "cases": len(rows), "fair": len(fair),
-            "named_first_and_fixed": float(np.mean([r["fixed"] for r in fair])) if fair else float("nan"),
-            "named_first": float(np.mean([r["named_first"] for r in fair])) if fair else float("nan"),
-            "none_cases": len(none),
-            "false_missing_effect": float(np.mean([r["verdict"] == "missing_effect" for r in none]))
-            if none else float("nan"),
-            "none_verdicts": {v: sum(r["verdict"] == v for r in none) for v in ("adequate", "missing_effect",
-                                                                              "unexplained")},
-            "per_effect": per_effect, "rows": rows}
+    return {
+        "seed": seed,
+        "cases": len(rows),
+        "fair": len(fair),
+        "named_first_and_fixed": float(np.mean([r["fixed"] for r in fair])) if fair else float("nan"),
+        "named_first": float(np.mean([r["named_first"] for r in fair])) if fair else float("nan"),
+        "none_cases": len(none),
+        "false_missing_effect": float(np.mean([r["verdict"] == "missing_effect" for r in none]))
+        if none
+        else float("nan"),
+        "none_verdicts": {
+            v: sum(r["verdict"] == v for r in none) for v in ("adequate", "missing_effect", "unexplained")
+        },
+        "per_effect": per_effect,
+        "rows": rows,
+    }
 
 
 def render(result: dict) -> str:
-    rows = [[name, e["fair"], f"{100 * e['named_first'] / e['fair']:.0f} %", f"{100 * e['fixed'] / e['fair']:.0f} %"]
-            for name, e in sorted(result["per_effect"].items())]
-    text = table(["hidden", "fair cases", "named first", "named first and fixed"], rows,
-                 f"hidden-effects, seed {result['seed']}: {result['cases']} cases, {result['fair']} fair")
-    return (text + f"\n\nnamed first and fixed: {100 * result['named_first_and_fixed']:.0f} % of "
-            f"{result['fair']} fair cases (named first: {100 * result['named_first']:.0f} %)\n"
-            f"none cases: {result['none_cases']}, missing_effect in "
-            f"{100 * result['false_missing_effect']:.0f} % (verdicts {result['none_verdicts']})")
+    rows = [
+        [name, e["fair"], f"{100 * e['named_first'] / e['fair']:.0f} %", f"{100 * e['fixed'] / e['fair']:.0f} %"]
+        for name, e in sorted(result["per_effect"].items())
+    ]
+    text = table(
+        ["hidden", "fair cases", "named first", "named first and fixed"],
+        rows,
+        f"hidden-effects, seed {result['seed']}: {result['cases']} cases, {result['fair']} fair",
+    )
+    return (
+        text + f"\n\nnamed first and fixed: {100 * result['named_first_and_fixed']:.0f} % of "
+        f"{result['fair']} fair cases (named first: {100 * result['named_first']:.0f} %)\n"
+        f"none cases: {result['none_cases']}, missing_effect in "
+        f"{100 * result['false_missing_effect']:.0f} % (verdicts {result['none_verdicts']})"
+    )
 
 
-register("hidden-effects", "does diagnose name and fix a hidden effect on random vessels? (randomised)",
-         run, render, randomised=True)
+register(
+    "hidden-effects",
+    "does diagnose name and fix a hidden effect on random vessels? (randomised)",
+    run,
+    render,
+    randomised=True,
+)

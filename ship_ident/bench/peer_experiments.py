@@ -3,6 +3,7 @@
 Ours runs through ``OnlineIdentifier`` with the node's defaults (``ONLINE``);
 the peers come from ``peer_models``. Each experiment returns a JSON-ready dict.
 """
+
 from __future__ import annotations
 
 import tempfile
@@ -29,7 +30,7 @@ from .peer_models import (
     ukf_start,
 )
 
-ONLINE = OnlineConfig()                 # the node's defaults: window, refit period, method
+ONLINE = OnlineConfig()  # the node's defaults: window, refit period, method
 OURS = (DEFAULT_METHOD, "rwlssvm+oe", "rwlssvm")
 INPUT_RATE_HZ = 10.0
 RECOVERY_TOLERANCE = 0.05
@@ -42,7 +43,6 @@ def _timed(fn, *args):
     t0 = time.perf_counter()
     out = fn(*args)
     return out, time.perf_counter() - t0
-
 
 
 def accuracy(quick: bool = False) -> dict:
@@ -78,16 +78,30 @@ def accuracy(quick: bool = False) -> dict:
     methods = {}
     for name in rmse:
         heading, yaw_rate = np.degrees(np.mean(rmse[name], axis=0))
-        methods[name] = {"rmse_heading_deg": float(heading), "rmse_yaw_rate_deg_s": float(yaw_rate),
-                         "fit_seconds": float(np.median(seconds[name])),
-                         "quantities": summarise(errors[name], [], bounds, truth) if name in errors else None}
-    return {"data": {"vessel": "seed001", "effects": STRUCTURE.to_json()["effects"], "train": "mixed",
-                     "train_duration_s": duration, "held_out": "random", "held_out_duration_s": 300.0,
-                     "seeds": len(seeds), "noise": {"rudder_deg": float(np.degrees(noise.rudder)),
-                                                    "heading_deg": float(np.degrees(noise.heading)),
-                                                    "yaw_rate_deg_s": float(np.degrees(noise.yaw_rate))}},
-            "truth": truth, "methods": methods}
-
+        methods[name] = {
+            "rmse_heading_deg": float(heading),
+            "rmse_yaw_rate_deg_s": float(yaw_rate),
+            "fit_seconds": float(np.median(seconds[name])),
+            "quantities": summarise(errors[name], [], bounds, truth) if name in errors else None,
+        }
+    return {
+        "data": {
+            "vessel": "seed001",
+            "effects": STRUCTURE.to_json()["effects"],
+            "train": "mixed",
+            "train_duration_s": duration,
+            "held_out": "random",
+            "held_out_duration_s": 300.0,
+            "seeds": len(seeds),
+            "noise": {
+                "rudder_deg": float(np.degrees(noise.rudder)),
+                "heading_deg": float(np.degrees(noise.heading)),
+                "yaw_rate_deg_s": float(np.degrees(noise.yaw_rate)),
+            },
+        },
+        "truth": truth,
+        "methods": methods,
+    }
 
 
 def recovery_time(times, k_trace, change_time: float, k_new: float) -> float:
@@ -106,8 +120,11 @@ def recovery_time(times, k_trace, change_time: float, k_new: float) -> float:
 def dataset_samples(dataset) -> list[Sample]:
     """The dataset as time-ordered input samples (heading wrapped, as a compass gives it)."""
     heading = dataset.meta.get("wrapped_heading", dataset.heading)
-    return [Sample(float(t), role, float(v)) for i, t in enumerate(dataset.time)
-            for role, v in (("rudder", dataset.rudder[i]), ("heading", heading[i]), ("yaw_rate", dataset.yaw_rate[i]))]
+    return [
+        Sample(float(t), role, float(v))
+        for i, t in enumerate(dataset.time)
+        for role, v in (("rudder", dataset.rudder[i]), ("heading", heading[i]), ("yaw_rate", dataset.yaw_rate[i]))
+    ]
 
 
 def online_trace(method: str, samples) -> tuple[np.ndarray, np.ndarray, list[float]]:
@@ -126,21 +143,40 @@ def tracking(quick: bool = False, maneuver: str = "random") -> dict:
     """K -30 % and T1 +30 % at a known time; recovery time and error before the change per method."""
     change_time = 240.0 if quick else 600.0
     window = ONLINE.window_length
-    sim = simulate(maneuver, "seed001", duration=2 * change_time, noise=1.0, seed=31,
-                   change=(change_time, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}))
+    sim = simulate(
+        maneuver,
+        "seed001",
+        duration=2 * change_time,
+        noise=1.0,
+        seed=31,
+        change=(change_time, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397}),
+    )
     data = sim.dataset
     k0, k_new = sim.truth["K"], sim.info["truth_after"]["K"]
-    out = {"maneuver": maneuver, "change_time_s": change_time, "duration_s": 2 * change_time,
-           "K_before": k0, "K_after": k_new, "T1_before": sim.truth["T1"], "T1_after": sim.info["truth_after"]["T1"],
-           "window_s": window, "refit_period_s": ONLINE.refit_period, "methods": {}, "compute_seconds": {}}
+    out = {
+        "maneuver": maneuver,
+        "change_time_s": change_time,
+        "duration_s": 2 * change_time,
+        "K_before": k0,
+        "K_after": k_new,
+        "T1_before": sim.truth["T1"],
+        "T1_after": sim.info["truth_after"]["T1"],
+        "window_s": window,
+        "refit_period_s": ONLINE.refit_period,
+        "methods": {},
+        "compute_seconds": {},
+    }
 
     def row(name, times, ks):
         before = (times > change_time - 120.0) & (times <= change_time)
         out["methods"][name] = {
             "recovery_s": recovery_time(times, ks, change_time, k_new),
-            "error_before_percent": float(100 * np.sqrt(np.mean(((ks[before] - k0) / k0) ** 2))) if before.any()
+            "error_before_percent": float(100 * np.sqrt(np.mean(((ks[before] - k0) / k0) ** 2)))
+            if before.any()
             else float("nan"),
-            "times": times.tolist(), "K": ks.tolist()}
+            "times": times.tolist(),
+            "K": ks.tolist(),
+        }
 
     samples = dataset_samples(data)
     for method in OURS:
@@ -167,8 +203,11 @@ def speed_and_scaling(compute_seconds: dict, quick: bool = False) -> dict:
     data = simulate("mixed", "seed001", duration=window_samples / INPUT_RATE_HZ, noise=1.0, seed=41).dataset
     cost = {}
     for method, compute in compute_seconds.items():
-        cost[f"ship_ident {method}"] = {"seconds": float(np.median(compute)), "per": "refit (online)",
-                                        "cpu_share": float(np.mean(compute)) / period}
+        cost[f"ship_ident {method}"] = {
+            "seconds": float(np.median(compute)),
+            "per": "refit (online)",
+            "cpu_share": float(np.mean(compute)) / period,
+        }
     for name, fit in (("frols (SysIdentPy)", fit_frols), ("lssvm-dual (seed)", fit_dual)):
         fit(data)
         _, s = _timed(fit, data)
@@ -187,8 +226,14 @@ def speed_and_scaling(compute_seconds: dict, quick: bool = False) -> dict:
         for n in sizes:
             progress(f"peers scaling: {method} on {n} samples")
             _, scaling.setdefault(method, {})[str(n)] = _timed(estimator.fit, STRUCTURE, long.slice(0, n))
-    return {"window_samples": window_samples, "refit_period_s": period, "input_rate_hz": INPUT_RATE_HZ,
-            "cost": cost, "refit_seconds": scaling, "replay": replay_throughput(300.0 if quick else 3600.0)}
+    return {
+        "window_samples": window_samples,
+        "refit_period_s": period,
+        "input_rate_hz": INPUT_RATE_HZ,
+        "cost": cost,
+        "refit_seconds": scaling,
+        "replay": replay_throughput(300.0 if quick else 3600.0),
+    }
 
 
 def replay_throughput(duration: float) -> dict:
@@ -202,8 +247,12 @@ def replay_throughput(duration: float) -> dict:
         write_simulation(sim, bag, "mcap")
         progress("peers replay: replaying")
         result = identify_bag(BagJob(bag, "sim", Topics(), ONLINE))
-    return {"bag_seconds": result.bag_seconds, "read_seconds": result.read_seconds,
-            "loop_seconds": result.loop_seconds, "estimates": len(result.rows), "refits": result.refits,
-            "speed_loop": result.bag_seconds / result.loop_seconds,
-            "speed_total": result.bag_seconds / (result.loop_seconds + result.read_seconds)}
-
+    return {
+        "bag_seconds": result.bag_seconds,
+        "read_seconds": result.read_seconds,
+        "loop_seconds": result.loop_seconds,
+        "estimates": len(result.rows),
+        "refits": result.refits,
+        "speed_loop": result.bag_seconds / result.loop_seconds,
+        "speed_total": result.bag_seconds / (result.loop_seconds + result.read_seconds),
+    }

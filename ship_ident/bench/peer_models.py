@@ -7,6 +7,7 @@ and the seed's plain LS-SVM in the dual (``fit_dual``), all on seed 001's
 model (nomoto2 + rudder offset + cubic yaw), and the held-out free-run RMSE
 (rad, rad/s) that judges them.
 """
+
 from __future__ import annotations
 
 import time
@@ -21,7 +22,7 @@ from ..structure import Structure
 
 STRUCTURE = Structure("nomoto2", ["rudder_offset", "cubic_yaw"])
 PARAMETERS = STRUCTURE.parameter_names
-UKF_START_S = 60.0                      # s of data behind the UKF's initial OLS fit
+UKF_START_S = 60.0  # s of data behind the UKF's initial OLS fit
 DUAL_MAX_ROWS = 3000
 
 
@@ -38,7 +39,7 @@ class RecursiveLeastSquares:
     def run(self, dataset, record_every: int = 10):
         """Final parameters, K every ``record_every`` rows (times, values), seconds per sample."""
         reg = _regression(dataset)
-        scale = np.sqrt(np.mean(reg.X ** 2, axis=0))
+        scale = np.sqrt(np.mean(reg.X**2, axis=0))
         X, y = reg.X / scale, reg.y
         k_column = reg.columns.index("delta")
         forgetting = 1.0 - dataset.sample_time / self.memory_s
@@ -79,23 +80,36 @@ class ParameterUKF:
         def fx(x, dt, d0=0.0, d1=0.0):
             K, T1, T2, T3 = max(x[3], 1e-3), max(x[4], 1e-2), max(x[5], 1e-3), max(x[6], 0.0)
             out = x.copy()
-            out[:3] = advance(2, dt, d0 + x[7], d1 + x[7], K, T1, T2, T3, x[0], x[1], x[2],
-                              -x[8] * one, *cubic, 2)
+            out[:3] = advance(2, dt, d0 + x[7], d1 + x[7], K, T1, T2, T3, x[0], x[1], x[2], -x[8] * one, *cubic, 2)
             return out
 
         def hx(x):
             return x[:2]
 
-        ukf = UnscentedKalmanFilter(dim_x=9, dim_z=2, dt=dataset.sample_time, fx=fx, hx=hx,
-                                    points=MerweScaledSigmaPoints(9, alpha=1e-3, beta=2.0, kappa=0.0))
+        ukf = UnscentedKalmanFilter(
+            dim_x=9,
+            dim_z=2,
+            dt=dataset.sample_time,
+            fx=fx,
+            hx=hx,
+            points=MerweScaledSigmaPoints(9, alpha=1e-3, beta=2.0, kappa=0.0),
+        )
         p0 = np.array([start[n] for n in PARAMETERS])
         scale = np.maximum(np.abs(p0), self.PARAMETER_FLOOR)
-        ukf.x = np.concatenate([[dataset.heading[0], dataset.yaw_rate[0],
-                                 initial_z(p0[0], p0[1], p0[2], p0[3], dataset.yaw_rate[0], 0.0,
-                                           dataset.rudder[0])], p0])
+        ukf.x = np.concatenate(
+            [
+                [
+                    dataset.heading[0],
+                    dataset.yaw_rate[0],
+                    initial_z(p0[0], p0[1], p0[2], p0[3], dataset.yaw_rate[0], 0.0, dataset.rudder[0]),
+                ],
+                p0,
+            ]
+        )
         ukf.P = np.diag(np.concatenate([[1e-4, 1e-4, 1e-3], (0.2 * scale) ** 2]))
-        ukf.R = np.diag([noise_level(dataset.heading, np.radians(0.01)) ** 2,
-                         noise_level(dataset.yaw_rate, np.radians(0.01)) ** 2])
+        ukf.R = np.diag(
+            [noise_level(dataset.heading, np.radians(0.01)) ** 2, noise_level(dataset.yaw_rate, np.radians(0.01)) ** 2]
+        )
         ukf.Q = np.diag(np.concatenate([[1e-8, 1e-7, 1e-7], (self.drift * scale) ** 2]))
         trace_t, trace_k = [], []
         start_clock = time.perf_counter()
@@ -144,4 +158,3 @@ def held_out_rmse(params: dict, test) -> tuple[float, float]:
     """Free-run heading and yaw-rate RMSE (rad, rad/s) from the measured initial state."""
     psi, r = STRUCTURE.simulate(params, test)
     return float(np.sqrt(np.mean((psi - test.heading) ** 2))), float(np.sqrt(np.mean((r - test.yaw_rate) ** 2)))
-

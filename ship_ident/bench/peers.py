@@ -39,6 +39,7 @@ CPU share of one core each needs at 10 Hz with the 5 s refit period.
 Scaling: refit time of ours for 1k, 10k and 100k samples; replay throughput
 of a 1-hour simulated bag (``fleet.identify_bag``, the replay loop).
 """
+
 from __future__ import annotations
 
 import os
@@ -65,12 +66,21 @@ __all__ = ["RECOVERY_TOLERANCE", "dataset_samples", "online_trace", "recovery_ti
 
 def run(quick: bool = False, plot_dir: str | None = None) -> dict:
     scenarios = {maneuver: tracking(quick, maneuver) for maneuver in TRACKING_MANEUVERS}
-    result = {"machine": {"cpus": os.cpu_count(), "processor": platform.processor() or platform.machine(),
-                          "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset")},
-              "online_config": {"method": ONLINE.method, "window_s": ONLINE.window_length,
-                                "refit_period_s": ONLINE.refit_period},
-              "accuracy": accuracy(quick), "tracking": scenarios,
-              "speed": speed_and_scaling(scenarios[TRACKING_MANEUVERS[0]]["compute_seconds"], quick)}
+    result = {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "processor": platform.processor() or platform.machine(),
+            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
+        },
+        "online_config": {
+            "method": ONLINE.method,
+            "window_s": ONLINE.window_length,
+            "refit_period_s": ONLINE.refit_period,
+        },
+        "accuracy": accuracy(quick),
+        "tracking": scenarios,
+        "speed": speed_and_scaling(scenarios[TRACKING_MANEUVERS[0]]["compute_seconds"], quick),
+    }
     for scenario in scenarios.values():
         del scenario["compute_seconds"]
     if plot_dir:
@@ -78,5 +88,10 @@ def run(quick: bool = False, plot_dir: str | None = None) -> dict:
     return result
 
 
-register("peers", "ship_ident against RLS, filterpy UKF, SysIdentPy FROLS and the dual LS-SVM: "
-         "accuracy, tracking, speed, scaling", run, render, plots=True)
+register(
+    "peers",
+    "ship_ident against RLS, filterpy UKF, SysIdentPy FROLS and the dual LS-SVM: accuracy, tracking, speed, scaling",
+    run,
+    render,
+    plots=True,
+)

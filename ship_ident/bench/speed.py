@@ -7,6 +7,7 @@ particle swarm over weights and gamma), parameter map, std errors and the
 in-sample free run. The first fit of each size is a warm-up and not timed.
 ``ms per 1k samples`` shows whether the cost is linear in the window.
 """
+
 from __future__ import annotations
 
 import os
@@ -45,11 +46,17 @@ def run(quick: bool = False) -> dict:
             repeats = 1 if quick or (slow and n > 10_000) else 3 if slow else 7
             progress(f"speed: {method} on {n} samples ({repeats} timed fits)")
             timings[method][str(n)] = median_fit_seconds(method, sim, repeats)
-    return {"data": {"vessel": "seed001", "maneuver": "mixed", "noise": "realistic (factor 1)",
-                     "sample_time_s": 0.1, "windows": list(windows)},
-            "machine": {"cpus": os.cpu_count(),
-                        "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset")},
-            "median_seconds": timings}
+    return {
+        "data": {
+            "vessel": "seed001",
+            "maneuver": "mixed",
+            "noise": "realistic (factor 1)",
+            "sample_time_s": 0.1,
+            "windows": list(windows),
+        },
+        "machine": {"cpus": os.cpu_count(), "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset")},
+        "median_seconds": timings,
+    }
 
 
 def render(result: dict) -> str:
@@ -58,9 +65,12 @@ def render(result: dict) -> str:
     for method, t in result["median_seconds"].items():
         rows.append([method] + [1e3 * t[n] for n in windows] + [1e3 * t[n] / (int(n) / 1000) for n in windows])
     m = result["machine"]
-    return table(["method"] + [f"{n} samples ms" for n in windows] + [f"ms/1k @ {n}" for n in windows], rows,
-                 f"speed: median time of one refit (full fit), {m['cpus']} CPUs, "
-                 f"OPENBLAS_NUM_THREADS={m['OPENBLAS_NUM_THREADS']}")
+    return table(
+        ["method"] + [f"{n} samples ms" for n in windows] + [f"ms/1k @ {n}" for n in windows],
+        rows,
+        f"speed: median time of one refit (full fit), {m['cpus']} CPUs, "
+        f"OPENBLAS_NUM_THREADS={m['OPENBLAS_NUM_THREADS']}",
+    )
 
 
 register("speed", "median refit time per method on 1k, 6k and 60k sample windows", run, render)

@@ -12,8 +12,8 @@ normalised STD (model STD / measured STD), the Taylor-diagram measures.
 ``plateau_size`` is the smallest set from which the mean E' stays within
 ``PLATEAU_TOLERANCE`` of the best: beyond it, more data stops helping.
 """
-from __future__ import annotations
 
+from __future__ import annotations
 
 from pathlib import Path
 
@@ -28,9 +28,17 @@ METHODS = ("tlssvm-gcv", "ols")
 QUICK_METHODS = ("tlssvm-gcv",)
 SAMPLE_TIME = 0.1  # s
 # (manoeuvre, amplitude deg (< 0: to port first), duration s): 10,109 samples in all
-TRAINING_PROGRAMME = (("zigzag", 10, 100), ("zigzag", 20, 100), ("turning", 35, 120), ("zigzag", -15, 100),
-                      ("turning", -25, 120), ("zigzag", -25, 100), ("turning", 15, 120), ("zigzag", 30, 100),
-                      ("turning", -35, 150))
+TRAINING_PROGRAMME = (
+    ("zigzag", 10, 100),
+    ("zigzag", 20, 100),
+    ("turning", 35, 120),
+    ("zigzag", -15, 100),
+    ("turning", -25, 120),
+    ("zigzag", -25, 100),
+    ("turning", 15, 120),
+    ("zigzag", 30, 100),
+    ("turning", -35, 150),
+)
 HELD_OUT = ("zigzag", 15, 100)
 PLATEAU_TOLERANCE = 0.05
 
@@ -69,25 +77,38 @@ def run(quick: bool = False, progress=progress, figure: str | None = None, plot_
         Path(plot_dir).mkdir(parents=True, exist_ok=True)
         figure = str(Path(plot_dir) / "taylor_training_size.png")
     vessel = threedof.VESSELS["dtc"]
-    records = [threedof.simulate_manoeuvre(vessel, m, a, duration=d, sample_time=SAMPLE_TIME, seed=i)[0]
-               for i, (m, a, d) in enumerate(TRAINING_PROGRAMME)]
-    held_out, _ = threedof.simulate_manoeuvre(vessel, *HELD_OUT[:2], duration=HELD_OUT[2],
-                                              sample_time=SAMPLE_TIME, seed=len(TRAINING_PROGRAMME))
-    result = {"vessel": vessel.name, "sample_time": SAMPLE_TIME, "held_out": list(HELD_OUT),
-              "reference_std": {d: float(np.std(held_out.dof(d))) for d in threedof.DOFS},
-              "methods": {}}
+    records = [
+        threedof.simulate_manoeuvre(vessel, m, a, duration=d, sample_time=SAMPLE_TIME, seed=i)[0]
+        for i, (m, a, d) in enumerate(TRAINING_PROGRAMME)
+    ]
+    held_out, _ = threedof.simulate_manoeuvre(
+        vessel, *HELD_OUT[:2], duration=HELD_OUT[2], sample_time=SAMPLE_TIME, seed=len(TRAINING_PROGRAMME)
+    )
+    result = {
+        "vessel": vessel.name,
+        "sample_time": SAMPLE_TIME,
+        "held_out": list(HELD_OUT),
+        "reference_std": {d: float(np.std(held_out.dof(d))) for d in threedof.DOFS},
+        "methods": {},
+    }
     for method in QUICK_METHODS if quick else METHODS:
         rows = []
         for size in QUICK_SIZES if quick else SIZES:
             progress(f"training-size: {method} on {size} samples")
-            identification = threedof.identify(training_records(size, records), vessel.length, vessel.speed,
-                                               method=method)
-            metrics = threedof.prediction_metrics(held_out, threedof.predict(identification.coefficients,
-                                                                             held_out))
-            rows.append({"size": size, **{d: {k: metrics[d][k] for k in ("r", "e_centred", "std_ratio",
-                                                                          "diverged")}
-                                          for d in threedof.DOFS},
-                         "truncation": {d: identification.info[d].get("truncation") for d in threedof.DOFS}})
+            identification = threedof.identify(
+                training_records(size, records), vessel.length, vessel.speed, method=method
+            )
+            metrics = threedof.prediction_metrics(held_out, threedof.predict(identification.coefficients, held_out))
+            rows.append(
+                {
+                    "size": size,
+                    **{
+                        d: {k: metrics[d][k] for k in ("r", "e_centred", "std_ratio", "diverged")}
+                        for d in threedof.DOFS
+                    },
+                    "truncation": {d: identification.info[d].get("truncation") for d in threedof.DOFS},
+                }
+            )
         result["methods"][method] = {"rows": rows, "plateau_size": plateau_size(rows)}
     if figure:
         taylor_diagram(result, METHODS[0], figure)
@@ -98,27 +119,38 @@ def run(quick: bool = False, progress=progress, figure: str | None = None, plot_
 def render(result: dict) -> str:
     """Seed 000 Table 3 layout: R, E', STD (normalised) per DOF for each training-set size."""
     ref = result["reference_std"]
-    lines = [f"held-out {result['held_out'][0]} {result['held_out'][1]}/{result['held_out'][1]}; reference STD: "
-             f"u {ref['surge']:.4f} m/s, v {ref['sway']:.4f} m/s, r {np.degrees(ref['yaw']):.3f} deg/s"]
+    lines = [
+        f"held-out {result['held_out'][0]} {result['held_out'][1]}/{result['held_out'][1]}; reference STD: "
+        f"u {ref['surge']:.4f} m/s, v {ref['sway']:.4f} m/s, r {np.degrees(ref['yaw']):.3f} deg/s"
+    ]
     for method, block in result["methods"].items():
-        lines += ["", method,
-                  f"{'size':>6} | {'SURGE R':>8} {'E´':>6} {'STD':>6} | {'SWAY R':>8} {'E´':>6} {'STD':>6} | "
-                  f"{'YAW R':>8} {'E´':>6} {'STD':>6} | k (u,v,r)",
-                  f"{'REF.':>6} | " + " | ".join(f"{1:8.3f} {0:6.3f} {1:6.3f}" for _ in threedof.DOFS) + " |"]
+        lines += [
+            "",
+            method,
+            f"{'size':>6} | {'SURGE R':>8} {'E´':>6} {'STD':>6} | {'SWAY R':>8} {'E´':>6} {'STD':>6} | "
+            f"{'YAW R':>8} {'E´':>6} {'STD':>6} | k (u,v,r)",
+            f"{'REF.':>6} | " + " | ".join(f"{1:8.3f} {0:6.3f} {1:6.3f}" for _ in threedof.DOFS) + " |",
+        ]
         for row in block["rows"]:
-            cells = [f"{row[d]['r']:8.3f} {row[d]['e_centred']:6.3g} {row[d]['std_ratio']:6.3g}"
-                     f"{'*' if row[d]['diverged'] else ' '}" for d in threedof.DOFS]
+            cells = [
+                f"{row[d]['r']:8.3f} {row[d]['e_centred']:6.3g} {row[d]['std_ratio']:6.3g}"
+                f"{'*' if row[d]['diverged'] else ' '}"
+                for d in threedof.DOFS
+            ]
             k = ",".join("-" if row["truncation"][d] is None else str(row["truncation"][d]) for d in threedof.DOFS)
             lines.append(f"{row['size']:>6} | " + " |".join(cells) + f"| {k}")
-        lines.append(f"adding data stops helping at {block['plateau_size']} samples (mean E' within "
-                     f"{PLATEAU_TOLERANCE:.0%} of the best from there on); * = free run diverged; "
-                     "k = singular values kept of p")
+        lines.append(
+            f"adding data stops helping at {block['plateau_size']} samples (mean E' within "
+            f"{PLATEAU_TOLERANCE:.0%} of the best from there on); * = free run diverged; "
+            "k = singular values kept of p"
+        )
     return "\n".join(lines)
 
 
 def taylor_diagram(result: dict, method: str, path: str) -> None:
     """Polar Taylor diagram: angle arccos(R), radius normalised STD, reference at (0, 1); PNG at ``path``."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -129,7 +161,7 @@ def taylor_diagram(result: dict, method: str, path: str) -> None:
     ax.set_thetamax(90)
     radius_max = 1.6
     ax.set_rlim(0, radius_max)
-    for e in (0.25, 0.5, 0.75, 1.0):   # E' contours: circles of radius e around the reference (1, 0)
+    for e in (0.25, 0.5, 0.75, 1.0):  # E' contours: circles of radius e around the reference (1, 0)
         t = np.linspace(0, np.pi, 200)
         x, y = 1 + e * np.cos(t), e * np.sin(t)
         ok = x >= 0
@@ -142,19 +174,37 @@ def taylor_diagram(result: dict, method: str, path: str) -> None:
     markers = {"surge": "o", "sway": "s", "yaw": "^"}
     for d in threedof.DOFS:
         kept = [r for r in rows if not r[d]["diverged"] and r[d]["r"] > 0 and r[d]["std_ratio"] < radius_max]
-        ax.scatter([np.arccos(min(r[d]["r"], 1.0)) for r in kept], [r[d]["std_ratio"] for r in kept],
-                   c=[r["size"] for r in kept], cmap="viridis", norm=norm, marker=markers[d], s=45,
-                   edgecolors="k", linewidths=0.4, label=d)
-    fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap="viridis"), ax=ax, pad=0.1,
-                 label="training-set size (samples)")
-    ax.set_title(f"Held-out {result['held_out'][0]} {result['held_out'][1]}/{result['held_out'][1]}, "
-                 f"{method}\nangle = arccos R, radius = STD / STD_ref, dashed: E' = 0.25 ... 1\n"
-                 f"(points with R <= 0, STD > {radius_max} or a diverged free run are not drawn)", fontsize=9)
+        ax.scatter(
+            [np.arccos(min(r[d]["r"], 1.0)) for r in kept],
+            [r[d]["std_ratio"] for r in kept],
+            c=[r["size"] for r in kept],
+            cmap="viridis",
+            norm=norm,
+            marker=markers[d],
+            s=45,
+            edgecolors="k",
+            linewidths=0.4,
+            label=d,
+        )
+    fig.colorbar(
+        matplotlib.cm.ScalarMappable(norm=norm, cmap="viridis"), ax=ax, pad=0.1, label="training-set size (samples)"
+    )
+    ax.set_title(
+        f"Held-out {result['held_out'][0]} {result['held_out'][1]}/{result['held_out'][1]}, "
+        f"{method}\nangle = arccos R, radius = STD / STD_ref, dashed: E' = 0.25 ... 1\n"
+        f"(points with R <= 0, STD > {radius_max} or a diverged free run are not drawn)",
+        fontsize=9,
+    )
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
-register("training-size", "3-DOF prediction quality vs training-set size (seed 000 Table 3, Taylor diagram)",
-         run, render, plots=True)
+register(
+    "training-size",
+    "3-DOF prediction quality vs training-set size (seed 000 Table 3, Taylor diagram)",
+    run,
+    render,
+    plots=True,
+)

@@ -30,6 +30,7 @@ Figures, all against the simulated truth:
   the change (RMS over the last two thirds of a window);
 * false ``vessel_changed`` per hour of steady data.
 """
+
 from __future__ import annotations
 
 import math
@@ -49,13 +50,13 @@ from .peers import RECOVERY_TOLERANCE, dataset_samples, recovery_time
 DEFAULTS = OnlineConfig()
 PARAMETERS = DEFAULTS.structure().parameter_names
 MANEUVER_CHOICES = ("steps", "steps", "zigzag10", "zigzag20", "steady_turns", "legs", "mixed")
-NOISE_RANGE = (0.5, 3.0)             # multiples of the realistic sensor noise
-STEP_SHARE = 0.5                     # share of cases with a change mid-run
-CHANGE = {"K": 0.7, "T1": 1.3}       # factors on the truth at the change
-WINDOWS_PER_RUN = 5.0                # run length in windows (quick: 3); a change at half of it
+NOISE_RANGE = (0.5, 3.0)  # multiples of the realistic sensor noise
+STEP_SHARE = 0.5  # share of cases with a change mid-run
+CHANGE = {"K": 0.7, "T1": 1.3}  # factors on the truth at the change
+WINDOWS_PER_RUN = 5.0  # run length in windows (quick: 3); a change at half of it
 WELL_EXCITED = {"K": 0.02, "T1": 0.05}  # CRB relative std at most this: the data determine K and T1
-OFF_TOLERANCE = 0.10                 # a published OK estimate this far off the truth is wrong
-MAX_SCALE = 10.0                     # a ship's window is at most 10 node windows (1800 s)
+OFF_TOLERANCE = 0.10  # a published OK estimate this far off the truth is wrong
+MAX_SCALE = 10.0  # a ship's window is at most 10 node windows (1800 s)
 DEFAULT_COUNT, QUICK_COUNT = 60, 6
 WORKERS = 2
 
@@ -69,10 +70,13 @@ def config_for(vessel) -> OnlineConfig:
         return DEFAULTS
     scale = float(np.clip(30.0 * vessel.parameters["T1"] / DEFAULTS.window_length, 1.0, MAX_SCALE))
     sample_time = min(1.0, round(DEFAULTS.sample_time * scale, 2))
-    return DEFAULTS.changed(window_length=DEFAULTS.window_length * scale,
-                            refit_period=DEFAULTS.refit_period * scale,
-                            min_window_length=DEFAULTS.min_window_length * scale,
-                            sample_time=sample_time, gap_threshold=5 * sample_time)
+    return DEFAULTS.changed(
+        window_length=DEFAULTS.window_length * scale,
+        refit_period=DEFAULTS.refit_period * scale,
+        min_window_length=DEFAULTS.min_window_length * scale,
+        sample_time=sample_time,
+        gap_threshold=5 * sample_time,
+    )
 
 
 def draw_case(seed: int, quick: bool = False) -> dict:
@@ -84,8 +88,16 @@ def draw_case(seed: int, quick: bool = False) -> dict:
     step = bool(rng.uniform() < STEP_SHARE)
     config = config_for(vessel)
     duration = config.window_length * (3.0 if quick else WINDOWS_PER_RUN)
-    return {"seed": seed, "vessel": vessel, "maneuver": maneuver, "noise": noise, "step": step,
-            "config": config, "duration": duration, "change_time": duration / 2 if step else None}
+    return {
+        "seed": seed,
+        "vessel": vessel,
+        "maneuver": maneuver,
+        "noise": noise,
+        "step": step,
+        "config": config,
+        "duration": duration,
+        "change_time": duration / 2 if step else None,
+    }
 
 
 def run_case(seed: int, quick: bool = False) -> dict:
@@ -96,8 +108,15 @@ def run_case(seed: int, quick: bool = False) -> dict:
     change = None
     if case["step"]:
         change = (case["change_time"], {k: f * vessel.parameters[k] for k, f in CHANGE.items()})
-    sim = simulate(case["maneuver"], vessel, duration=case["duration"], sample_time=config.sample_time,
-                   noise=noise, seed=seed, change=change)
+    sim = simulate(
+        case["maneuver"],
+        vessel,
+        duration=case["duration"],
+        sample_time=config.sample_time,
+        noise=noise,
+        seed=seed,
+        change=change,
+    )
     truth_after = sim.info.get("truth_after", sim.truth)
     refits = []
     identifier = OnlineIdentifier(config)
@@ -108,20 +127,38 @@ def run_case(seed: int, quick: bool = False) -> dict:
         start = max(record.time - config.window_length, 0.0)
         regime = _regime(start, record.time, case["change_time"])
         estimate_window = data["estimate_window"] or {}
-        refits.append({
-            "time": record.time, "status": data["status"], "new": data["new_estimate"],
-            "conditions": sorted(data["conditions"]), "parameters": data["parameters"],
-            "std_errors": data["std_errors"],
-            "estimate_regime": _regime(estimate_window.get("start", math.nan),
-                                       estimate_window.get("end", math.nan), case["change_time"]),
-            "crb": _window_bound(sim, noise, start, record.time, truth_after if regime == "after" else sim.truth)
-            if regime != "across" else None})
-    return {"seed": seed, "vessel": vessel.name, "description": vessel.description,
-            "maneuver": case["maneuver"], "noise": case["noise"], "step": case["step"],
-            "change_time": case["change_time"], "duration": case["duration"],
-            "window_s": config.window_length, "refit_period_s": config.refit_period,
-            "sample_time_s": config.sample_time, "truth": sim.truth, "truth_after": truth_after,
-            "refits": refits}
+        refits.append(
+            {
+                "time": record.time,
+                "status": data["status"],
+                "new": data["new_estimate"],
+                "conditions": sorted(data["conditions"]),
+                "parameters": data["parameters"],
+                "std_errors": data["std_errors"],
+                "estimate_regime": _regime(
+                    estimate_window.get("start", math.nan), estimate_window.get("end", math.nan), case["change_time"]
+                ),
+                "crb": _window_bound(sim, noise, start, record.time, truth_after if regime == "after" else sim.truth)
+                if regime != "across"
+                else None,
+            }
+        )
+    return {
+        "seed": seed,
+        "vessel": vessel.name,
+        "description": vessel.description,
+        "maneuver": case["maneuver"],
+        "noise": case["noise"],
+        "step": case["step"],
+        "change_time": case["change_time"],
+        "duration": case["duration"],
+        "window_s": config.window_length,
+        "refit_period_s": config.refit_period,
+        "sample_time_s": config.sample_time,
+        "truth": sim.truth,
+        "truth_after": truth_after,
+        "refits": refits,
+    }
 
 
 def _regime(start: float, end: float, change_time: float | None) -> str:
@@ -137,14 +174,18 @@ def _window_bound(sim, noise: Noise, start: float, end: float, truth: dict) -> d
     a, b = int(np.searchsorted(time, start)), int(np.searchsorted(time, end))
     if b - a < 20:
         return {"K": math.inf, "T1": math.inf}
-    exact = Dataset(time=time[a:b], rudder=sim.true_rudder[a:b], heading=sim.true_heading[a:b],
-                    yaw_rate=sim.true_yaw_rate[a:b], meta=sim.dataset.meta)
+    exact = Dataset(
+        time=time[a:b],
+        rudder=sim.true_rudder[a:b],
+        heading=sim.true_heading[a:b],
+        yaw_rate=sim.true_yaw_rate[a:b],
+        meta=sim.dataset.meta,
+    )
     h = sim.dataset.sample_time
     r = sim.true_yaw_rate
     initial = [(sim.true_heading[a], r[a], (r[min(a + 1, len(r) - 1)] - r[max(a - 1, 0)]) / (2 * h))]
     try:
-        bound = cramer_rao_bound(sim.structure, truth, exact, initial, noise.heading, noise.yaw_rate,
-                                 noise.rudder)
+        bound = cramer_rao_bound(sim.structure, truth, exact, initial, noise.heading, noise.yaw_rate, noise.rudder)
     except np.linalg.LinAlgError:
         return {"K": math.inf, "T1": math.inf}
     return {q: float(bound[q] / truth[q]) if np.isfinite(bound[q]) else math.inf for q in ("K", "T1")}
@@ -194,23 +235,31 @@ def summarise(cases: list[dict]) -> dict:
             changed += sum("vessel_changed" in r["conditions"] for r in case["refits"])
     recoveries = np.array(recoveries, dtype=float)
     return {
-        "cases": len(cases), "steady_cases": sum(not c["step"] for c in cases),
+        "cases": len(cases),
+        "steady_cases": sum(not c["step"] for c in cases),
         "step_cases": sum(c["step"] for c in cases),
         "coverage": {p: _share(v) for p, v in covered.items()},
         "published_ok": len(covered["K"]),
-        "steady": {"published_ok": len(off["K"]),
-                   **{q: {"worst_percent": 100 * worst[q][0], "worst_seed": worst[q][1],
-                          "share_off": _share(off[q])} for q in off}},
-        "well_excited": {"refits": excited, "rejected": rejected,
-                         "share_rejected": rejected / excited if excited else math.nan,
-                         "reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1]))},
-        "recovery": {"median_s": float(np.median(recoveries)) if len(recoveries) else math.nan,
-                     "worst_s": float(np.max(recoveries)) if len(recoveries) else math.nan,
-                     "share_beyond_window": _share(beyond),
-                     "error_before_percent_median": float(np.nanmedian(errors_before))
-                     if errors_before else math.nan,
-                     "error_before_percent_worst": float(np.nanmax(errors_before))
-                     if errors_before else math.nan},
+        "steady": {
+            "published_ok": len(off["K"]),
+            **{
+                q: {"worst_percent": 100 * worst[q][0], "worst_seed": worst[q][1], "share_off": _share(off[q])}
+                for q in off
+            },
+        },
+        "well_excited": {
+            "refits": excited,
+            "rejected": rejected,
+            "share_rejected": rejected / excited if excited else math.nan,
+            "reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
+        },
+        "recovery": {
+            "median_s": float(np.median(recoveries)) if len(recoveries) else math.nan,
+            "worst_s": float(np.max(recoveries)) if len(recoveries) else math.nan,
+            "share_beyond_window": _share(beyond),
+            "error_before_percent_median": float(np.nanmedian(errors_before)) if errors_before else math.nan,
+            "error_before_percent_worst": float(np.nanmax(errors_before)) if errors_before else math.nan,
+        },
         "false_changes_per_hour": changed / steady_hours if steady_hours else math.nan,
         "steady_hours": steady_hours,
     }
@@ -241,9 +290,11 @@ def case_line(case: dict) -> str:
     ok = sum(r["new"] and r["status"] == "OK" for r in refits)
     excited = [r for r in refits if well_excited(r)]
     rejected = sum(not (r["new"] and r["status"] == "OK") for r in excited)
-    text = (f"seed {case['seed']} {case['vessel']} {case['maneuver']} noise {case['noise']:.2f}x "
-            f"window {case['window_s']:.0f} s: {ok}/{len(refits)} refits OK, rejected {rejected}/"
-            f"{len(excited)} well-excited")
+    text = (
+        f"seed {case['seed']} {case['vessel']} {case['maneuver']} noise {case['noise']:.2f}x "
+        f"window {case['window_s']:.0f} s: {ok}/{len(refits)} refits OK, rejected {rejected}/"
+        f"{len(excited)} well-excited"
+    )
     if case["step"]:
         recovery, error = _recovery(case)
         text += f"; step at {case['change_time']:.0f} s: K back within 5 % after {recovery:.0f} s"
@@ -251,8 +302,9 @@ def case_line(case: dict) -> str:
     return text
 
 
-def run(quick: bool = False, seed: int = 0, count: int | None = None, plot_dir: str | None = None,
-        workers: int = WORKERS) -> dict:
+def run(
+    quick: bool = False, seed: int = 0, count: int | None = None, plot_dir: str | None = None, workers: int = WORKERS
+) -> dict:
     count = count or (QUICK_COUNT if quick else DEFAULT_COUNT)
     seeds = [seed + i for i in range(count)]
     cases = []
@@ -265,8 +317,7 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None, plot_dir: 
         for i, s in enumerate(seeds):
             cases.append(run_case(s, quick))
             progress(f"vessels {i + 1}/{count}: {case_line(cases[-1])}")
-    result = {"summary": summarise(cases), "cases": [_brief(c) for c in cases],
-              "well_excited_crb": WELL_EXCITED}
+    result = {"summary": summarise(cases), "cases": [_brief(c) for c in cases], "well_excited_crb": WELL_EXCITED}
     if plot_dir:
         result["plots"] = plot(cases, plot_dir)
     return result
@@ -282,6 +333,7 @@ def _brief(case: dict) -> dict:
 def plot(cases: list[dict], plot_dir: str) -> list[str]:
     """vessels_recovery.png: the K error (%) in force against the time since the step, per step case."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -290,8 +342,12 @@ def plot(cases: list[dict], plot_dir: str) -> list[str]:
     for case in (c for c in cases if c["step"]):
         times, ks = _k_trace(case)
         truth = np.where(times > case["change_time"], case["truth_after"]["K"], case["truth"]["K"])
-        ax.plot((times - case["change_time"]) / case["window_s"], 100 * np.abs(ks / truth - 1), lw=0.8,
-                label=f"seed {case['seed']}")
+        ax.plot(
+            (times - case["change_time"]) / case["window_s"],
+            100 * np.abs(ks / truth - 1),
+            lw=0.8,
+            label=f"seed {case['seed']}",
+        )
     ax.axhline(100 * RECOVERY_TOLERANCE, color="k", ls="--", lw=1)
     ax.axvline(0, color="k", lw=1)
     ax.set_yscale("log")
@@ -310,31 +366,55 @@ def plot(cases: list[dict], plot_dir: str) -> list[str]:
 
 def render(result: dict) -> str:
     s = result["summary"]
-    lines = [f"vessels: {s['cases']} cases ({s['steady_cases']} steady, {s['step_cases']} with K -30 %, "
-             f"T1 +30 % mid-run), seed {result.get('seed')}; case i replays with --seed (seed + i) --count 1"]
+    lines = [
+        f"vessels: {s['cases']} cases ({s['steady_cases']} steady, {s['step_cases']} with K -30 %, "
+        f"T1 +30 % mid-run), seed {result.get('seed')}; case i replays with --seed (seed + i) --count 1"
+    ]
     lines += [c["line"] for c in result["cases"]]
-    lines.append(table(["parameter", "95 % coverage"], [[p, v] for p, v in s["coverage"].items()],
-                       f"coverage of the truth by the 95 % interval, over {s['published_ok']} published OK "
-                       "estimates (target about 0.95)"))
+    lines.append(
+        table(
+            ["parameter", "95 % coverage"],
+            [[p, v] for p, v in s["coverage"].items()],
+            f"coverage of the truth by the 95 % interval, over {s['published_ok']} published OK "
+            "estimates (target about 0.95)",
+        )
+    )
     st = s["steady"]
-    lines.append(table(["parameter", "worst error %", "worst case seed", "share > 10 % off"],
-                       [[q, st[q]["worst_percent"], st[q]["worst_seed"], st[q]["share_off"]] for q in ("K", "T1")],
-                       f"steady vessels: {st['published_ok']} published OK estimates (target: none > 10 % off)"))
+    lines.append(
+        table(
+            ["parameter", "worst error %", "worst case seed", "share > 10 % off"],
+            [[q, st[q]["worst_percent"], st[q]["worst_seed"], st[q]["share_off"]] for q in ("K", "T1")],
+            f"steady vessels: {st['published_ok']} published OK estimates (target: none > 10 % off)",
+        )
+    )
     we = s["well_excited"]
     crb = result["well_excited_crb"]
-    lines.append(f"well-excited windows (CRB relative std K <= {100 * crb['K']:.0f} %, T1 <= "
-                 f"{100 * crb['T1']:.0f} %) on steady vessels: {we['rejected']} of {we['refits']} refits "
-                 f"rejected ({100 * we['share_rejected']:.1f} %, target <= 5 %); conditions: "
-                 + (", ".join(f"{c} {n}" for c, n in we["reasons"].items()) or "-"))
+    lines.append(
+        f"well-excited windows (CRB relative std K <= {100 * crb['K']:.0f} %, T1 <= "
+        f"{100 * crb['T1']:.0f} %) on steady vessels: {we['rejected']} of {we['refits']} refits "
+        f"rejected ({100 * we['share_rejected']:.1f} %, target <= 5 %); conditions: "
+        + (", ".join(f"{c} {n}" for c, n in we["reasons"].items()) or "-")
+    )
     rc = s["recovery"]
-    lines.append(f"step cases: K back within 5 % after {rc['median_s']:.0f} s median (target <= 60 s), "
-                 f"worst {rc['worst_s']:.0f} s; beyond one window + one refit period: "
-                 f"{100 * rc['share_beyond_window']:.0f} % (target 0); K error before the change "
-                 f"{rc['error_before_percent_median']:.2f} % median, {rc['error_before_percent_worst']:.2f} % worst")
-    lines.append(f"false vessel_changed: {s['false_changes_per_hour']:.2f} per hour over "
-                 f"{s['steady_hours']:.1f} h of steady data (target 0)")
+    lines.append(
+        f"step cases: K back within 5 % after {rc['median_s']:.0f} s median (target <= 60 s), "
+        f"worst {rc['worst_s']:.0f} s; beyond one window + one refit period: "
+        f"{100 * rc['share_beyond_window']:.0f} % (target 0); K error before the change "
+        f"{rc['error_before_percent_median']:.2f} % median, {rc['error_before_percent_worst']:.2f} % worst"
+    )
+    lines.append(
+        f"false vessel_changed: {s['false_changes_per_hour']:.2f} per hour over "
+        f"{s['steady_hours']:.1f} h of steady data (target 0)"
+    )
     return "\n\n".join(lines)
 
 
-register("vessels", "the online core on randomised vessels (USVs to ships, steady and stepped): coverage, "
-         "errors, rejected refits, recovery, false changes", run, render, plots=True, randomised=True)
+register(
+    "vessels",
+    "the online core on randomised vessels (USVs to ships, steady and stepped): coverage, "
+    "errors, rejected refits, recovery, false changes",
+    run,
+    render,
+    plots=True,
+    randomised=True,
+)

@@ -1,4 +1,5 @@
 """``ship-ident bench NAME [--json] [--quick]``: run a registered benchmark (ship_ident/bench)."""
+
 from __future__ import annotations
 
 import json
@@ -9,18 +10,24 @@ def add_parser(subparsers) -> None:
 
     available = benchmarks()
     parser = subparsers.add_parser(
-        "bench", help="run a benchmark of the estimators",
-        description="Benchmarks: " + "; ".join(f"{b.name}: {b.description}" for b in available.values()))
-    parser.add_argument("name", choices=sorted(available), metavar="NAME",
-                        help="one of " + ", ".join(sorted(available)))
+        "bench",
+        help="run a benchmark of the estimators",
+        description="Benchmarks: " + "; ".join(f"{b.name}: {b.description}" for b in available.values()),
+    )
+    parser.add_argument(
+        "name", choices=sorted(available), metavar="NAME", help="one of " + ", ".join(sorted(available))
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (smoke test, minutes -> seconds)")
-    parser.add_argument("--plot-dir", metavar="DIR",
-                        help="write the benchmark's figures (PNG) here, for those that draw any")
-    parser.add_argument("--seed", type=int, metavar="N",
-                        help="randomised benchmarks: replay this seed (default: a fresh one, printed)")
-    parser.add_argument("--count", type=int, metavar="N",
-                        help="randomised benchmarks: how many vessels or cases to draw")
+    parser.add_argument(
+        "--plot-dir", metavar="DIR", help="write the benchmark's figures (PNG) here, for those that draw any"
+    )
+    parser.add_argument(
+        "--seed", type=int, metavar="N", help="randomised benchmarks: replay this seed (default: a fresh one, printed)"
+    )
+    parser.add_argument(
+        "--count", type=int, metavar="N", help="randomised benchmarks: how many vessels or cases to draw"
+    )
     parser.set_defaults(func=run)
 
 

@@ -1,4 +1,5 @@
 """Argument helpers shared by the subcommands: data input, model choice, JSON output."""
+
 from __future__ import annotations
 
 import argparse
@@ -17,23 +18,40 @@ def add_data_args(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("data input (bags and CSV)")
     for role in ("rudder", "heading", "yaw_rate", "speed"):
         flag = role.replace("_", "-")
-        group.add_argument(f"--{flag}-topic", default=getattr(DEFAULT_TOPICS, role), metavar="TOPIC",
-                           help=f"std_msgs/Float64 {role.replace('_', ' ')} topic (default %(default)s)")
-    group.add_argument("--imu-topic", default="", metavar="TOPIC",
-                       help="sensor_msgs/Imu topic (ENU) for heading and yaw rate instead of the two "
-                            "Float64 topics")
-    group.add_argument("--sample-time", type=float, default=0.1, metavar="S",
-                       help="resampling step in s (default %(default)s)")
-    group.add_argument("--columns", default="", metavar="ROLE=NAME,...",
-                       help="CSV columns by name, e.g. speed=surge_speed,rudder=delta (roles t, rudder, "
-                            "heading, yaw_rate, speed; SI units); without it the canonical names and "
-                            "common synonyms (surge_speed, u; delta; psi, yaw; r; time) are recognised")
+        group.add_argument(
+            f"--{flag}-topic",
+            default=getattr(DEFAULT_TOPICS, role),
+            metavar="TOPIC",
+            help=f"std_msgs/Float64 {role.replace('_', ' ')} topic (default %(default)s)",
+        )
+    group.add_argument(
+        "--imu-topic",
+        default="",
+        metavar="TOPIC",
+        help="sensor_msgs/Imu topic (ENU) for heading and yaw rate instead of the two Float64 topics",
+    )
+    group.add_argument(
+        "--sample-time", type=float, default=0.1, metavar="S", help="resampling step in s (default %(default)s)"
+    )
+    group.add_argument(
+        "--columns",
+        default="",
+        metavar="ROLE=NAME,...",
+        help="CSV columns by name, e.g. speed=surge_speed,rudder=delta (roles t, rudder, "
+        "heading, yaw_rate, speed; SI units); without it the canonical names and "
+        "common synonyms (surge_speed, u; delta; psi, yaw; r; time) are recognised",
+    )
 
 
 def topics_from_args(args: argparse.Namespace) -> Topics:
-    return Topics(rudder=args.rudder_topic, heading=args.heading_topic,
-                  yaw_rate=args.yaw_rate_topic, speed=args.speed_topic, imu=args.imu_topic,
-                  csv_columns=parse_columns(args.columns))
+    return Topics(
+        rudder=args.rudder_topic,
+        heading=args.heading_topic,
+        yaw_rate=args.yaw_rate_topic,
+        speed=args.speed_topic,
+        imu=args.imu_topic,
+        csv_columns=parse_columns(args.columns),
+    )
 
 
 def load_data(args: argparse.Namespace, path) -> Dataset:
@@ -54,15 +72,18 @@ def say_columns(args: argparse.Namespace, path, mapping: dict | None) -> None:
 def load_recordings(args: argparse.Namespace, paths) -> Dataset:
     """Several bags or CSV files as one Dataset on ``--sample-time``, each recording its own
     segment(s), never bridged; ``meta["recordings"]`` names each one's sample range."""
-    return join_recordings([load_data(args, path) for path in paths], [str(p) for p in paths],
-                           args.sample_time)
+    return join_recordings([load_data(args, path) for path in paths], [str(p) for p in paths], args.sample_time)
 
 
 def add_recordings_arg(parser: argparse.ArgumentParser, name: str = "data") -> None:
     """One or more recordings fitted (or judged) together."""
-    parser.add_argument(name, metavar="DATA", nargs="+",
-                        help="rosbag2 directories, .mcap files or CSV files; several recordings make "
-                             "one dataset, each its own segment (never bridged)")
+    parser.add_argument(
+        name,
+        metavar="DATA",
+        nargs="+",
+        help="rosbag2 directories, .mcap files or CSV files; several recordings make "
+        "one dataset, each its own segment (never bridged)",
+    )
 
 
 def sources(paths) -> str:
@@ -73,15 +94,26 @@ def sources(paths) -> str:
 def add_model_args(parser: argparse.ArgumentParser, method: bool = True, threedof: bool = False) -> None:
     """``--model``, ``--effects`` and (optionally) ``--method``; with ``threedof`` the model may be
     seed 000's ``3dof`` (its --method defaults to tlssvm, so an unset --method is None)."""
-    parser.add_argument("--model", default="nomoto2", choices=("nomoto1", "nomoto2") + (("3dof",) if threedof else ()),
-                        help="base model (default %(default)s)" + ("; 3dof: seed 000's surge-sway-yaw model"
-                                                                   if threedof else ""))
-    parser.add_argument("--effects", default="", metavar="A,B",
-                        help="comma-separated effects, e.g. rudder_offset,cubic_yaw (default: none)")
+    parser.add_argument(
+        "--model",
+        default="nomoto2",
+        choices=("nomoto1", "nomoto2") + (("3dof",) if threedof else ()),
+        help="base model (default %(default)s)" + ("; 3dof: seed 000's surge-sway-yaw model" if threedof else ""),
+    )
+    parser.add_argument(
+        "--effects",
+        default="",
+        metavar="A,B",
+        help="comma-separated effects, e.g. rudder_offset,cubic_yaw (default: none)",
+    )
     if method:
-        parser.add_argument("--method", default=None if threedof else DEFAULT_METHOD, metavar="NAME",
-                            help=f"estimator: {', '.join(method_names())} (default {DEFAULT_METHOD}"
-                                 + ("; with --model 3dof: tlssvm or ols, default tlssvm)" if threedof else ")"))
+        parser.add_argument(
+            "--method",
+            default=None if threedof else DEFAULT_METHOD,
+            metavar="NAME",
+            help=f"estimator: {', '.join(method_names())} (default {DEFAULT_METHOD}"
+            + ("; with --model 3dof: tlssvm or ols, default tlssvm)" if threedof else ")"),
+        )
 
 
 def structure_from_args(args: argparse.Namespace) -> Structure:
@@ -89,5 +121,4 @@ def structure_from_args(args: argparse.Namespace) -> Structure:
 
 
 def add_json_arg(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", action="store_true",
-                        help="print one JSON object on stdout and nothing else there")
+    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout and nothing else there")

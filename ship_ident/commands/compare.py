@@ -1,4 +1,5 @@
 """``ship-ident compare``: run a saved model free on other data (cross-manoeuvre validation)."""
+
 from __future__ import annotations
 
 import json
@@ -7,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CommandError
+from ..jsonio import dumps_json
 from ..metrics import free_run_fit
 from ..structure import Structure, require_samples
-from ..jsonio import dumps_json
 from .common import add_data_args, add_json_arg, add_recordings_arg, load_recordings, sources
 from .identify import data_field, format_fit
 from .threedof import add_threedof_args, run_compare
@@ -17,10 +18,12 @@ from .threedof import add_threedof_args, run_compare
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "compare", help="run a saved model free on other data",
+        "compare",
+        help="run a saved model free on other data",
         description="Drive a model saved by `identify --save` with the measured rudder of other "
-                    "data, starting from the measured heading and yaw rate, and compare the "
-                    "free-run heading and yaw rate with the measurements.")
+        "data, starting from the measured heading and yaw rate, and compare the "
+        "free-run heading and yaw rate with the measurements.",
+    )
     parser.add_argument("model", metavar="MODEL.json", help="model file written by identify --save")
     add_recordings_arg(parser)
     add_json_arg(parser)
@@ -30,8 +33,10 @@ def add_parser(subparsers) -> None:
 
 
 def model_file_error(path, err: Exception) -> CommandError:
-    return CommandError(f"{path} is not a model file written by `ship-ident identify --save` "
-                        f"({type(err).__name__}: {err}); identify the model again with --save")
+    return CommandError(
+        f"{path} is not a model file written by `ship-ident identify --save` "
+        f"({type(err).__name__}: {err}); identify the model again with --save"
+    )
 
 
 def read_model_file(path) -> dict:
@@ -66,14 +71,21 @@ def run(args) -> int:
     dataset = load_recordings(args, args.data)
     require_samples(dataset)
     heading, yaw_rate = structure.simulate(parameters, dataset)
-    record = {"structure": structure.to_json(), "parameters": parameters, "model_file": str(args.model),
-              "data": data_field(args.data), "recordings": dataset.meta["recordings"],
-              "samples": dataset.n_samples,
-              "fit": free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate)}
+    record = {
+        "structure": structure.to_json(),
+        "parameters": parameters,
+        "model_file": str(args.model),
+        "data": data_field(args.data),
+        "recordings": dataset.meta["recordings"],
+        "samples": dataset.n_samples,
+        "fit": free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate),
+    }
     if args.json:
         print(dumps_json(record))
     else:
-        print(f"{structure.label()} from {args.model} run free on {sources(args.data)} "
-              f"({dataset.n_samples} samples, {dataset.duration:.1f} s)")
+        print(
+            f"{structure.label()} from {args.model} run free on {sources(args.data)} "
+            f"({dataset.n_samples} samples, {dataset.duration:.1f} s)"
+        )
         print(format_fit(record["fit"]))
     return 0

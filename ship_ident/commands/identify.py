@@ -1,4 +1,5 @@
 """``ship-ident identify``: fit a model to a bag or CSV file and print (or save) the estimate."""
+
 from __future__ import annotations
 
 import math
@@ -7,22 +8,32 @@ from pathlib import Path
 from ..errors import CommandError
 from ..estimators import DEFAULT_METHOD, make_estimator
 from ..estimators.base import excitation_shortfall
-from ..structure import require_samples
 from ..jsonio import dumps_json
-from .common import (add_data_args, add_json_arg, add_model_args, add_recordings_arg, load_recordings,
-                     sources, structure_from_args)
+from ..structure import require_samples
+from .common import (
+    add_data_args,
+    add_json_arg,
+    add_model_args,
+    add_recordings_arg,
+    load_recordings,
+    sources,
+    structure_from_args,
+)
 from .threedof import add_threedof_args, run_identify
 
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "identify", help="identify a Nomoto (or 3-DOF) model from bags or CSV files",
+        "identify",
+        help="identify a Nomoto (or 3-DOF) model from bags or CSV files",
         description="Fit a Nomoto model (plus effects), or seed 000's 3-DOF model, to recorded or "
-                    "simulated data and report parameters, standard errors and the free-run fit.")
+        "simulated data and report parameters, standard errors and the free-run fit.",
+    )
     add_recordings_arg(parser)
     add_model_args(parser, threedof=True)
-    parser.add_argument("--save", metavar="MODEL.json", help="write the estimate as a model file "
-                        "for `ship-ident compare`")
+    parser.add_argument(
+        "--save", metavar="MODEL.json", help="write the estimate as a model file for `ship-ident compare`"
+    )
     add_json_arg(parser)
     add_data_args(parser)
     add_threedof_args(parser)
@@ -59,13 +70,17 @@ def require_excitation(dataset) -> None:
 
 def format_estimate(estimate, source) -> str:
     """A readable table of an Estimate: angles in degrees, other units SI."""
-    lines = [f"{estimate.structure.label()} identified by {estimate.method} from {source} "
-             f"({estimate.samples} samples, {estimate.window[1] - estimate.window[0]:.1f} s)",
-             f"  {'parameter':<10} {'value':>12} {'std error':>12}  unit"]
+    lines = [
+        f"{estimate.structure.label()} identified by {estimate.method} from {source} "
+        f"({estimate.samples} samples, {estimate.window[1] - estimate.window[0]:.1f} s)",
+        f"  {'parameter':<10} {'value':>12} {'std error':>12}  unit",
+    ]
     for name in estimate.structure.parameter_names:
         unit, scale = display_unit(estimate.structure.parameter(name))
-        lines.append(f"  {name:<10} {estimate.parameters[name] * scale:>12.5g} "
-                     f"{estimate.std_errors[name] * scale:>12.3g}  {unit}")
+        lines.append(
+            f"  {name:<10} {estimate.parameters[name] * scale:>12.5g} "
+            f"{estimate.std_errors[name] * scale:>12.3g}  {unit}"
+        )
     lines.append(format_fit(estimate.fit))
     if estimate.flags:
         lines.append(f"flags: {', '.join(estimate.flags)}")
@@ -82,8 +97,10 @@ def display_unit(parameter) -> tuple[str, float]:
 def format_fit(fit: dict) -> str:
     """The free-run fit figures, heading in deg and yaw rate in deg/s."""
     deg = math.degrees(1.0)
-    return (f"free-run fit: heading RMSE {fit['rmse_heading'] * deg:.3g} deg, "
-            f"R {fit['r_heading']:.4f}, fit {fit['fit_percent_heading']:.1f} %; "
-            f"yaw rate RMSE {fit['rmse_yaw_rate'] * deg:.3g} deg/s, "
-            f"R {fit['r_yaw_rate']:.4f}, fit {fit['fit_percent_yaw_rate']:.1f} %"
-            + (" (diverged)" if fit.get("diverged") else ""))
+    return (
+        f"free-run fit: heading RMSE {fit['rmse_heading'] * deg:.3g} deg, "
+        f"R {fit['r_heading']:.4f}, fit {fit['fit_percent_heading']:.1f} %; "
+        f"yaw rate RMSE {fit['rmse_yaw_rate'] * deg:.3g} deg/s, "
+        f"R {fit['r_yaw_rate']:.4f}, fit {fit['fit_percent_yaw_rate']:.1f} %"
+        + (" (diverged)" if fit.get("diverged") else "")
+    )

@@ -6,32 +6,44 @@ rosgraph_msgs/Clock with its bag time, at ``--rate`` times real time. Nodes
 started with ``use_sim_time:=true`` follow the bag's clock. ``--loop``
 repeats the bag with the clock running on (no jump back).
 """
+
 from __future__ import annotations
 
 import sys
 import time
 
-from ..io import Topics, read_samples
+from ..io import DEFAULT_TOPICS, Topics, read_samples
 from .common import add_data_args, topics_from_args
 
 
 def add_parser(subparsers) -> None:
-    parser = subparsers.add_parser("play", help="publish a bag's topics live with /clock",
-                                   description=__doc__.split("\n\n", 1)[1])
+    parser = subparsers.add_parser(
+        "play", help="publish a bag's topics live with /clock", description=__doc__.split("\n\n", 1)[1]
+    )
     parser.add_argument("bag", metavar="BAG", help="rosbag2 directory, .mcap file or CSV file")
     add_data_args(parser)
-    parser.add_argument("--rate", type=float, default=1.0, metavar="R",
-                        help="playback speed in multiples of real time (default %(default)s)")
+    parser.add_argument(
+        "--rate",
+        type=float,
+        default=1.0,
+        metavar="R",
+        help="playback speed in multiples of real time (default %(default)s)",
+    )
     parser.add_argument("--loop", action="store_true", help="play the bag again and again")
-    parser.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
-                        help="wait up to S s for a subscriber on the rudder topic before playing")
+    parser.add_argument(
+        "--wait-for-subscribers",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="wait up to S s for a subscriber on the rudder topic before playing",
+    )
     parser.set_defaults(func=run)
 
 
 class Player:
     """Publishers of the input topics and of /clock on an rclpy node."""
 
-    def __init__(self, node, topics: Topics = Topics(), depth: int = 100):
+    def __init__(self, node, topics: Topics = DEFAULT_TOPICS, depth: int = 100):
         from rclpy.qos import QoSProfile
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64
@@ -39,8 +51,10 @@ class Player:
         self._Float64, self._Clock = Float64, Clock
         self.node = node
         qos = QoSProfile(depth=depth)
-        self.publishers = {role: node.create_publisher(Float64, getattr(topics, role), qos)
-                           for role in ("rudder", "heading", "yaw_rate", "speed")}
+        self.publishers = {
+            role: node.create_publisher(Float64, getattr(topics, role), qos)
+            for role in ("rudder", "heading", "yaw_rate", "speed")
+        }
         self.clock = node.create_publisher(Clock, "/clock", qos)
 
     def publish_clock(self, time_s: float) -> None:
@@ -98,8 +112,11 @@ def run(args) -> int:
     try:
         player = Player(node, topics)
         if args.wait_for_subscribers and not player.wait_for_subscribers(args.wait_for_subscribers):
-            print(f"ship-ident play: no subscriber on {topics.rudder} after "
-                  f"{args.wait_for_subscribers:g} s; playing anyway", file=sys.stderr)
+            print(
+                f"ship-ident play: no subscriber on {topics.rudder} after "
+                f"{args.wait_for_subscribers:g} s; playing anyway",
+                file=sys.stderr,
+            )
         player.play(samples, args.rate, args.loop)
     except KeyboardInterrupt:
         pass

@@ -10,6 +10,7 @@ as the replay goes: Ctrl-C or SIGTERM stop it after the refit in progress
 and still leave a complete MCAP with every estimate up to then (exit code
 130 or 143).
 """
+
 from __future__ import annotations
 
 import math
@@ -30,47 +31,90 @@ DEFAULTS = OnlineConfig()
 
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
-        "replay", help="run the online identifier over a bag, faster than real time",
-        description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("bag", metavar="BAG", nargs="+",
-                        help="rosbag2 directory, .mcap file or CSV file; several (or --jobs, --table, "
-                             "--dask): a fleet run into one table, see ship_ident/fleet.py")
+        "replay",
+        help="run the online identifier over a bag, faster than real time",
+        description=__doc__.split("\n\n", 1)[1],
+    )
+    parser.add_argument(
+        "bag",
+        metavar="BAG",
+        nargs="+",
+        help="rosbag2 directory, .mcap file or CSV file; several (or --jobs, --table, "
+        "--dask): a fleet run into one table, see ship_ident/fleet.py",
+    )
     add_data_args(parser)
     add_model_args(parser)
     parser.set_defaults(effects=",".join(DEFAULTS.effects), method=DEFAULTS.method)
-    parser.add_argument("--window-length", type=float, default=DEFAULTS.window_length, metavar="S",
-                        help="s of data in each fit (default %(default)s)")
-    parser.add_argument("--refit-period", type=float, default=DEFAULTS.refit_period, metavar="S",
-                        help="s of bag time between refits (default %(default)s)")
-    parser.add_argument("--min-window-length", type=float, default=DEFAULTS.min_window_length,
-                        metavar="S", help="s of data before the first fit (default %(default)s)")
-    parser.add_argument("--gap-threshold", type=float, default=DEFAULTS.gap_threshold, metavar="S",
-                        help="s without a sample that splits the window; 0: five sample times "
-                             "(default %(default)s)")
-    parser.add_argument("--rudder-limit", type=float, default=math.degrees(DEFAULTS.rudder_limit),
-                        metavar="DEG", help="the steering gear's limit in deg: a rudder held there is "
-                                            "rudder_saturated (default %(default).0f)")
-    parser.add_argument("--change-ratio", type=float, default=DEFAULTS.change_ratio, metavar="R",
-                        help="restart the window where the vessel changed, when the newest 30 s are "
-                             "mispredicted R times worse (mean squares) than usual; 0: never "
-                             "(default %(default)s)")
-    parser.add_argument("--json", action="store_true",
-                        help="print one JSON object per refit on stdout, one per line (JSON lines)")
-    parser.add_argument("--out", metavar="OUT.mcap",
-                        help="write an MCAP with the input topics and the estimates")
+    parser.add_argument(
+        "--window-length",
+        type=float,
+        default=DEFAULTS.window_length,
+        metavar="S",
+        help="s of data in each fit (default %(default)s)",
+    )
+    parser.add_argument(
+        "--refit-period",
+        type=float,
+        default=DEFAULTS.refit_period,
+        metavar="S",
+        help="s of bag time between refits (default %(default)s)",
+    )
+    parser.add_argument(
+        "--min-window-length",
+        type=float,
+        default=DEFAULTS.min_window_length,
+        metavar="S",
+        help="s of data before the first fit (default %(default)s)",
+    )
+    parser.add_argument(
+        "--gap-threshold",
+        type=float,
+        default=DEFAULTS.gap_threshold,
+        metavar="S",
+        help="s without a sample that splits the window; 0: five sample times (default %(default)s)",
+    )
+    parser.add_argument(
+        "--rudder-limit",
+        type=float,
+        default=math.degrees(DEFAULTS.rudder_limit),
+        metavar="DEG",
+        help="the steering gear's limit in deg: a rudder held there is rudder_saturated (default %(default).0f)",
+    )
+    parser.add_argument(
+        "--change-ratio",
+        type=float,
+        default=DEFAULTS.change_ratio,
+        metavar="R",
+        help="restart the window where the vessel changed, when the newest 30 s are "
+        "mispredicted R times worse (mean squares) than usual; 0: never "
+        "(default %(default)s)",
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object per refit on stdout, one per line (JSON lines)"
+    )
+    parser.add_argument("--out", metavar="OUT.mcap", help="write an MCAP with the input topics and the estimates")
     add_fleet_arguments(parser)
     parser.set_defaults(func=run)
 
 
 def config_from_args(args, topics: Topics, has_speed: bool) -> OnlineConfig:
     return OnlineConfig(
-        rudder_topic=topics.rudder, heading_topic=topics.heading, yaw_rate_topic=topics.yaw_rate,
-        speed_topic=topics.speed if has_speed else "", imu_topic=topics.imu,
-        sample_time=args.sample_time, window_length=args.window_length,
-        refit_period=args.refit_period, min_window_length=min(args.min_window_length, args.window_length),
-        change_ratio=args.change_ratio, gap_threshold=args.gap_threshold,
+        rudder_topic=topics.rudder,
+        heading_topic=topics.heading,
+        yaw_rate_topic=topics.yaw_rate,
+        speed_topic=topics.speed if has_speed else "",
+        imu_topic=topics.imu,
+        sample_time=args.sample_time,
+        window_length=args.window_length,
+        refit_period=args.refit_period,
+        min_window_length=min(args.min_window_length, args.window_length),
+        change_ratio=args.change_ratio,
+        gap_threshold=args.gap_threshold,
         rudder_limit=math.radians(args.rudder_limit),
-        model=args.model, effects=args.effects, method=args.method).validate()
+        model=args.model,
+        effects=args.effects,
+        method=args.method,
+    ).validate()
 
 
 def run(args) -> int:
@@ -96,15 +140,19 @@ def run(args) -> int:
     topics = topics_from_args(args)
     handlers = {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
-        result = replay_bag(bag, topics, config_from_args(args, topics, has_speed=True),
-                            args.out, on_record, stop, sys.stderr.isatty())
+        result = replay_bag(
+            bag, topics, config_from_args(args, topics, has_speed=True), args.out, on_record, stop, sys.stderr.isatty()
+        )
     finally:
         for signum, handler in handlers.items():
             signal.signal(signum, handler)
     if result.interrupted:
         kept = f"; {args.out} holds them" if args.out else ""
-        print(f"ship-ident replay: interrupted at bag time {result.duration:.1f} s after "
-              f"{len(result.records)} refits{kept}", file=sys.stderr)
+        print(
+            f"ship-ident replay: interrupted at bag time {result.duration:.1f} s after "
+            f"{len(result.records)} refits{kept}",
+            file=sys.stderr,
+        )
         return 128 + received[0]
     if not args.json:
         print_summary(result.records, result.duration, result.wall_seconds)
@@ -114,18 +162,26 @@ def run(args) -> int:
 def print_summary(records, duration: float, wall: float) -> None:
     """The last estimate, its fit and the replay speed, for people."""
     fitted = [r for r in records if r.new_estimate]
-    print(f"{len(records)} refits over {duration:.0f} s of bag in {wall:.1f} s "
-          f"({duration / max(wall, 1e-9):.0f}x real time); {len(fitted)} gave a new estimate")
+    print(
+        f"{len(records)} refits over {duration:.0f} s of bag in {wall:.1f} s "
+        f"({duration / max(wall, 1e-9):.0f}x real time); {len(fitted)} gave a new estimate"
+    )
     if not records:
         return
     last = records[-1].to_json()
-    print(f"last refit at {last['stamp']:.1f} s: {last['status']}"
-          + "".join(f"\n  {c}: {m}" for c, m in last["conditions"].items()))
+    print(
+        f"last refit at {last['stamp']:.1f} s: {last['status']}"
+        + "".join(f"\n  {c}: {m}" for c, m in last["conditions"].items())
+    )
     if last["parameters"]:
-        print(f"  {last['structure']['model']} + {', '.join(last['structure']['effects']) or 'no effects'}"
-              f" ({last['method']}):")
+        print(
+            f"  {last['structure']['model']} + {', '.join(last['structure']['effects']) or 'no effects'}"
+            f" ({last['method']}):"
+        )
         for name, value in last["parameters"].items():
             std = last["std_errors"].get(name, math.nan)
             print(f"    {name:>8} = {value:12.5g}  +/- {std:.2g}")
-        print(f"  free-run rmse: yaw rate {math.degrees(last['fit']['rmse_yaw_rate']):.3f} deg/s, "
-              f"heading {math.degrees(last['fit']['rmse_heading']):.2f} deg")
+        print(
+            f"  free-run rmse: yaw rate {math.degrees(last['fit']['rmse_yaw_rate']):.3f} deg/s, "
+            f"heading {math.degrees(last['fit']['rmse_heading']):.2f} deg"
+        )

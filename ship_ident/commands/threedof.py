@@ -1,5 +1,6 @@
 """The ``--model 3dof`` side of ``identify``, ``compare`` and ``simulate``: seed 000's 3-DOF model
 (surge u, sway v, yaw rate r) from CSV files and bags, and its model files."""
+
 from __future__ import annotations
 
 import argparse
@@ -30,16 +31,29 @@ def add_threedof_args(parser: argparse.ArgumentParser, fitting: bool = True) -> 
     and the velocity topic of bags."""
     group = parser.add_argument_group("3-DOF model (--model 3dof)")
     if fitting:
-        group.add_argument("--length", type=float, metavar="M",
-                           help="length between perpendiculars Lpp in m (needed by --model 3dof)")
-        group.add_argument("--reference-speed", type=float, metavar="M/S",
-                           help="reference (approach) speed U0 in m/s of u' = (u - U0)/U (default: the "
-                                "mean surge speed over the first 3 s of the first recording)")
-        group.add_argument("--truncation", default="gcv", choices=TRUNCATION_RULES,
-                           help="truncation rule of the tlssvm solver (default %(default)s)")
-    group.add_argument("--velocity-topic", default=DEFAULT_VELOCITY_TOPIC, metavar="TOPIC",
-                       help="nav_msgs/Odometry or geometry_msgs/TwistStamped topic of the body-fixed "
-                            "velocity in bags (default %(default)s)")
+        group.add_argument(
+            "--length", type=float, metavar="M", help="length between perpendiculars Lpp in m (needed by --model 3dof)"
+        )
+        group.add_argument(
+            "--reference-speed",
+            type=float,
+            metavar="M/S",
+            help="reference (approach) speed U0 in m/s of u' = (u - U0)/U (default: the "
+            "mean surge speed over the first 3 s of the first recording)",
+        )
+        group.add_argument(
+            "--truncation",
+            default="gcv",
+            choices=TRUNCATION_RULES,
+            help="truncation rule of the tlssvm solver (default %(default)s)",
+        )
+    group.add_argument(
+        "--velocity-topic",
+        default=DEFAULT_VELOCITY_TOPIC,
+        metavar="TOPIC",
+        help="nav_msgs/Odometry or geometry_msgs/TwistStamped topic of the body-fixed "
+        "velocity in bags (default %(default)s)",
+    )
 
 
 def read_records(args: argparse.Namespace, paths) -> list[Record]:
@@ -57,8 +71,10 @@ def solver(args: argparse.Namespace) -> str:
     """The 3-DOF solver name (``ols`` or ``tlssvm-RULE``) of --method and --truncation."""
     method = args.method or "tlssvm"
     if method not in METHODS:
-        raise CommandError(f"--model 3dof fits with --method {' or '.join(METHODS)}, not {method!r} "
-                           "(the truncation rule is --truncation)")
+        raise CommandError(
+            f"--model 3dof fits with --method {' or '.join(METHODS)}, not {method!r} "
+            "(the truncation rule is --truncation)"
+        )
     return "ols" if method == "ols" else f"tlssvm-{args.truncation}"
 
 
@@ -80,15 +96,21 @@ def run_identify(args: argparse.Namespace) -> int:
         raise CommandError("the first recording does not start moving ahead; give --reference-speed")
     identification = identify(records, args.length, speed, method=method)
     fit = free_run_fit(identification.coefficients, records)
-    record = {"structure": {"model": MODEL, "effects": []}, **identification.to_json(), "fit": fit,
-              "data": [str(p) for p in args.data] if len(args.data) > 1 else str(args.data[0])}
+    record = {
+        "structure": {"model": MODEL, "effects": []},
+        **identification.to_json(),
+        "fit": fit,
+        "data": [str(p) for p in args.data] if len(args.data) > 1 else str(args.data[0]),
+    }
     if args.save:
         Path(args.save).write_text(dumps_json(record, indent=2) + "\n")
     if args.json:
         print(dumps_json(record))
     else:
-        print(f"3dof identified by {method} from {' + '.join(map(str, args.data))} "
-              f"({identification.samples} samples, Lpp {args.length:g} m, U0 {speed:.4g} m/s)")
+        print(
+            f"3dof identified by {method} from {' + '.join(map(str, args.data))} "
+            f"({identification.samples} samples, Lpp {args.length:g} m, U0 {speed:.4g} m/s)"
+        )
         print(format_coefficients(identification.coefficients))
         print(format_fit(fit))
     return 0
@@ -119,16 +141,20 @@ def format_coefficients(coefficients: Coefficients) -> str:
 def format_fit(fit: dict) -> str:
     def shown(dof, value):
         return math.degrees(value) if dof == "yaw" else value
+
     return "free-run fit: " + "; ".join(
-        f"{dof} RMSE {shown(dof, m['rmse']):.3g} {UNITS[dof]}, R {m['r']:.4f}" + (" (diverged)" if m.get("diverged") else "")
-        for dof, m in fit.items())
+        f"{dof} RMSE {shown(dof, m['rmse']):.3g} {UNITS[dof]}, R {m['r']:.4f}"
+        + (" (diverged)" if m.get("diverged") else "")
+        for dof, m in fit.items()
+    )
 
 
 def coefficients_from_json(record: dict) -> Coefficients:
     """The Coefficients of a model file written by ``identify --model 3dof --save`` (or a truth file)."""
     c = record["coefficients"]
-    vectors = {dof: np.array([float(c[dof][t]["value"]) for t in (X_TERMS if dof == "surge" else YN_TERMS)])
-               for dof in DOFS}
+    vectors = {
+        dof: np.array([float(c[dof][t]["value"]) for t in (X_TERMS if dof == "surge" else YN_TERMS)]) for dof in DOFS
+    }
     coefficients = Coefficients(length=float(c["length"]), speed=float(c["speed"]), **vectors)
     if not all(np.all(np.isfinite(v)) for v in vectors.values()) or coefficients.length <= 0:
         raise ValueError("non-finite coefficients or a length <= 0")
@@ -140,13 +166,19 @@ def run_compare(args: argparse.Namespace, record: dict) -> int:
     try:
         coefficients = coefficients_from_json(record)
     except (KeyError, TypeError, ValueError) as err:
-        raise CommandError(f"{args.model} is not a 3dof model file ({type(err).__name__}: {err}); identify "
-                           "the model again with --model 3dof --save") from None
+        raise CommandError(
+            f"{args.model} is not a 3dof model file ({type(err).__name__}: {err}); identify "
+            "the model again with --model 3dof --save"
+        ) from None
     records = read_records(args, args.data)
     fit = free_run_fit(coefficients, records)
-    out = {"structure": {"model": MODEL, "effects": []}, "model_file": str(args.model),
-           "data": [str(p) for p in args.data] if len(args.data) > 1 else str(args.data[0]),
-           "samples": int(sum(len(r) for r in records)), "fit": fit}
+    out = {
+        "structure": {"model": MODEL, "effects": []},
+        "model_file": str(args.model),
+        "data": [str(p) for p in args.data] if len(args.data) > 1 else str(args.data[0]),
+        "samples": int(sum(len(r) for r in records)),
+        "fit": fit,
+    }
     if args.json:
         print(dumps_json(out))
     else:
@@ -166,12 +198,23 @@ def run_simulate(args: argparse.Namespace, fmt: str) -> int:
     if args.effects:
         raise CommandError("--model 3dof takes no --effects")
     manoeuvre, amplitude = MANOEUVRES[args.maneuver]
-    noisy, _ = simulate_manoeuvre(vessel, manoeuvre, amplitude, duration=args.duration,
-                                  sample_time=args.sample_time, noise=args.noise, seed=args.seed)
+    noisy, _ = simulate_manoeuvre(
+        vessel,
+        manoeuvre,
+        amplitude,
+        duration=args.duration,
+        sample_time=args.sample_time,
+        noise=args.noise,
+        seed=args.seed,
+    )
     write_record(noisy, args.out, fmt, args.velocity_topic)
     if args.truth_out:
-        truth = {"structure": {"model": MODEL, "effects": []}, "vessel": vessel, "maneuver": args.maneuver,
-                 "coefficients": VESSELS[vessel].coefficients().to_json()}
+        truth = {
+            "structure": {"model": MODEL, "effects": []},
+            "vessel": vessel,
+            "maneuver": args.maneuver,
+            "coefficients": VESSELS[vessel].coefficients().to_json(),
+        }
         Path(args.truth_out).write_text(json.dumps(truth, indent=2) + "\n")
     print(f"wrote {args.out} ({fmt}, {len(noisy)} samples, {noisy.time[-1] - noisy.time[0]:.1f} s, 3dof {vessel})")
     return 0

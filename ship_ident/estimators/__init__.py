@@ -1,6 +1,7 @@
 """Estimators by name: ``ols``, ``lssvm``, ``rlssvm``, ``rwlssvm``, ``tlssvm``, each optionally
 refined by ``+oe`` (output error, multiple shooting) or ``+pem`` (prediction error: the
 free-run error whitened by a Kalman innovation filter that knows the rudder noise)."""
+
 from __future__ import annotations
 
 from .base import Estimate, Estimator, RegressionEstimator, Solution
@@ -34,5 +35,16 @@ def make_estimator(method: str = DEFAULT_METHOD, **options) -> Estimator:
     return REFINEMENTS[refine](estimator) if refine else estimator
 
 
-__all__ = ["Estimate", "Estimator", "RegressionEstimator", "Solution", "ESTIMATORS", "DEFAULT_METHOD",
-           "MethodError", "make_estimator", "method_names", "OutputError", "PredictionError"]
+__all__ = [
+    "Estimate",
+    "Estimator",
+    "RegressionEstimator",
+    "Solution",
+    "ESTIMATORS",
+    "DEFAULT_METHOD",
+    "MethodError",
+    "make_estimator",
+    "method_names",
+    "OutputError",
+    "PredictionError",
+]

@@ -8,6 +8,7 @@ coefficient covariance to standard errors (delta method, inflated for
 residual autocorrelation), judges excitation and runs the model free on the
 data for the fit figures.
 """
+
 from __future__ import annotations
 
 import json
@@ -21,9 +22,9 @@ from ..metrics import effective_sample_fraction, free_run_fit
 from ..signals import Signals, compute_signals, noise_level
 from ..structure import Regression, Structure
 
-MIN_RUDDER_STD = np.radians(1.0)   # rad: below this the rudder does not excite the hull
+MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite the hull
 MIN_YAW_RATE_STD = np.radians(0.02)  # rad/s: an absolute floor under the noise-relative need
-HARDLY_MOVES_SNR = 2.0                # yaw-rate std below this many noise levels: it hardly moves
+HARDLY_MOVES_SNR = 2.0  # yaw-rate std below this many noise levels: it hardly moves
 # Relative standard errors (std / |value|) above which a window does not determine a parameter.
 MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3}
 
@@ -76,14 +77,16 @@ class Estimate:
 def excitation(dataset: Dataset) -> dict:
     """Rudder and yaw-rate activity of a dataset (rad, rad/s), and the yaw-rate activity below which
     the yaw rate hardly moves: twice its sensor noise (the spread is then mostly noise)."""
-    return {"rudder_std": float(np.std(dataset.rudder)),
-            "yaw_rate_std": float(np.std(dataset.yaw_rate)),
-            "yaw_rate_std_needed": max(HARDLY_MOVES_SNR * noise_level(dataset.yaw_rate, 0.0),
-                                       MIN_YAW_RATE_STD)}
+    return {
+        "rudder_std": float(np.std(dataset.rudder)),
+        "yaw_rate_std": float(np.std(dataset.yaw_rate)),
+        "yaw_rate_std_needed": max(HARDLY_MOVES_SNR * noise_level(dataset.yaw_rate, 0.0), MIN_YAW_RATE_STD),
+    }
 
 
-def excitation_shortfall(dataset: Dataset, parameters: dict | None = None,
-                         std_errors: dict | None = None) -> str | None:
+def excitation_shortfall(
+    dataset: Dataset, parameters: dict | None = None, std_errors: dict | None = None
+) -> str | None:
     """Why the data cannot support an estimate (a sentence with the figures), or None.
 
     Without an estimate only the floors apply: a rudder that hardly moves, a yaw rate whose spread
@@ -93,25 +96,33 @@ def excitation_shortfall(dataset: Dataset, parameters: dict | None = None,
     ex = excitation(dataset)
     if ex["rudder_std"] < MIN_RUDDER_STD or ex["yaw_rate_std"] < ex["yaw_rate_std_needed"]:
         moves = "the rudder hardly moves" if ex["rudder_std"] < MIN_RUDDER_STD else "the yaw rate hardly moves"
-        return (f"too little excitation ({moves}): rudder std {np.degrees(ex['rudder_std']):.2f} deg "
-                f"(need {np.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
-                f"deg/s (need {np.degrees(ex['yaw_rate_std_needed']):.3f}, twice its noise)")
+        return (
+            f"too little excitation ({moves}): rudder std {np.degrees(ex['rudder_std']):.2f} deg "
+            f"(need {np.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
+            f"deg/s (need {np.degrees(ex['yaw_rate_std_needed']):.3f}, twice its noise)"
+        )
     if parameters is None or std_errors is None:
         return None
-    relative = {name: std_errors.get(name, np.inf) / max(abs(parameters[name]), 1e-12)
-                for name in MAX_RELATIVE_ERRORS if name in parameters}
+    relative = {
+        name: std_errors.get(name, np.inf) / max(abs(parameters[name]), 1e-12)
+        for name in MAX_RELATIVE_ERRORS
+        if name in parameters
+    }
     loose = {name: r for name, r in relative.items() if not r <= MAX_RELATIVE_ERRORS[name]}
     if not loose:
         return None
-    figures = ", ".join(f"{name} {parameters[name]:.4g} +- {std_errors.get(name, np.inf):.2g} "
-                        f"({100 * r:.0f} %, need <= {100 * MAX_RELATIVE_ERRORS[name]:.0f} %)"
-                        for name, r in loose.items())
-    return (f"the window does not determine {', '.join(loose)}: {figures}; rudder std "
-            f"{np.degrees(ex['rudder_std']):.2f} deg, yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} deg/s")
+    figures = ", ".join(
+        f"{name} {parameters[name]:.4g} +- {std_errors.get(name, np.inf):.2g} "
+        f"({100 * r:.0f} %, need <= {100 * MAX_RELATIVE_ERRORS[name]:.0f} %)"
+        for name, r in loose.items()
+    )
+    return (
+        f"the window does not determine {', '.join(loose)}: {figures}; rudder std "
+        f"{np.degrees(ex['rudder_std']):.2f} deg, yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} deg/s"
+    )
 
 
-def excitation_flags(dataset: Dataset, parameters: dict | None = None,
-                     std_errors: dict | None = None) -> list[str]:
+def excitation_flags(dataset: Dataset, parameters: dict | None = None, std_errors: dict | None = None) -> list[str]:
     return ["low_excitation"] if excitation_shortfall(dataset, parameters, std_errors) else []
 
 
@@ -121,16 +132,25 @@ def fit_substeps(h: float, params: dict) -> int:
     return substeps_for(h, min(params[n] for n in ("T", "T1", "T2") if n in params), 1.5)
 
 
-def finish_estimate(structure: Structure, dataset: Dataset, method: str, params: dict,
-                    std_errors: dict, flags: list, info: dict) -> Estimate:
+def finish_estimate(
+    structure: Structure, dataset: Dataset, method: str, params: dict, std_errors: dict, flags: list, info: dict
+) -> Estimate:
     """Add the in-sample free-run fit, excitation facts and flags."""
     psi_sim, r_sim = structure.simulate(params, dataset, substeps=fit_substeps(dataset.sample_time, params))
     fit = free_run_fit(dataset.heading, dataset.yaw_rate, psi_sim, r_sim)
     flags = list(dict.fromkeys(flags + excitation_flags(dataset) + (["diverged"] if fit["diverged"] else [])))
     info = dict(info, excitation=excitation(dataset))
-    return Estimate(structure=structure, method=method, parameters=params, std_errors=std_errors,
-                    fit=fit, samples=dataset.n_samples, flags=flags, info=info,
-                    window=(float(dataset.time[0]), float(dataset.time[-1])))
+    return Estimate(
+        structure=structure,
+        method=method,
+        parameters=params,
+        std_errors=std_errors,
+        fit=fit,
+        samples=dataset.n_samples,
+        flags=flags,
+        info=info,
+        window=(float(dataset.time[0]), float(dataset.time[-1])),
+    )
 
 
 class Estimator:
@@ -156,32 +176,35 @@ class RegressionEstimator(Estimator):
         signals: Signals = compute_signals(dataset, self.differentiation)
         regression = structure.regression(signals)
         if regression.X.shape[0] <= regression.X.shape[1]:
-            raise DataError(f"{regression.X.shape[0]} usable samples for {regression.X.shape[1]} "
-                            "coefficients; record a longer window")
+            raise DataError(
+                f"{regression.X.shape[0]} usable samples for {regression.X.shape[1]} "
+                "coefficients; record a longer window"
+            )
         return regression
 
     def fit(self, structure: Structure, dataset: Dataset) -> Estimate:
         regression = self.regression(structure, dataset)
         solution = self.solve(regression.X, regression.y)
         params, flags = structure.parameters_from_coefficients(solution.w, regression)
-        residual = solution.residual if solution.residual is not None else \
-            regression.y - regression.X @ solution.w
+        residual = solution.residual if solution.residual is not None else regression.y - regression.X @ solution.w
         dof = max(len(residual) - len(solution.w), 1)
         sigma2 = float(residual @ residual / dof) / effective_sample_fraction(residual)
         std = coefficient_std_errors(structure, regression, solution.w, sigma2 * solution.cov)
-        info = dict(solution.info, condition_number=float(np.linalg.cond(_scaled(regression.X))),
-                    residual_std=float(np.sqrt(sigma2)), columns=regression.columns)
-        return finish_estimate(structure, dataset, self.name, structure.clip_to_bounds(params),
-                               std, flags, info)
+        info = dict(
+            solution.info,
+            condition_number=float(np.linalg.cond(_scaled(regression.X))),
+            residual_std=float(np.sqrt(sigma2)),
+            columns=regression.columns,
+        )
+        return finish_estimate(structure, dataset, self.name, structure.clip_to_bounds(params), std, flags, info)
 
 
 def _scaled(X: np.ndarray) -> np.ndarray:
-    scale = np.sqrt(np.mean(X ** 2, axis=0))
+    scale = np.sqrt(np.mean(X**2, axis=0))
     return X / np.where(scale > 0, scale, 1.0)
 
 
-def coefficient_std_errors(structure: Structure, regression: Regression, w: np.ndarray,
-                           cov_w: np.ndarray) -> dict:
+def coefficient_std_errors(structure: Structure, regression: Regression, w: np.ndarray, cov_w: np.ndarray) -> dict:
     """Delta method: standard errors of the physical parameters from the coefficient covariance."""
     names = structure.parameter_names
     base, _ = structure.parameters_from_coefficients(w, regression)
@@ -193,5 +216,4 @@ def coefficient_std_errors(structure: Structure, regression: Regression, w: np.n
         shifted, _ = structure.parameters_from_coefficients(wp, regression)
         J[:, j] = [(shifted[n] - base[n]) / step for n in names]
     var = np.einsum("ij,jk,ik->i", J, cov_w, J)
-    return {n: float(np.sqrt(max(v, 0.0))) if np.isfinite(v) else float("inf")
-            for n, v in zip(names, var)}
+    return {n: float(np.sqrt(max(v, 0.0))) if np.isfinite(v) else float("inf") for n, v in zip(names, var)}

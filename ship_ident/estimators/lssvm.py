@@ -22,6 +22,7 @@ LS-SVM (Suykens): min 1/2 w'w + gamma/2 sum v_i e_i^2, e_i = y_i - x_i'w - b.
   which equals the bias-free dual (X_s X_s' + (gamma V)^-1) a = y, w_s = X_s' a
   (tested).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,7 +33,7 @@ DUAL_MAX_SAMPLES = 1500  # the N x N dual (O(N^3)) is solved up to this size; be
 
 
 def column_scales(X: np.ndarray) -> np.ndarray:
-    scale = np.sqrt(np.mean(X ** 2, axis=0))
+    scale = np.sqrt(np.mean(X**2, axis=0))
     return np.where(scale > 0, scale, 1.0)
 
 
@@ -44,12 +45,11 @@ def ridge_primal(X: np.ndarray, y: np.ndarray, gamma: float, weights: np.ndarray
     A = Xs.T @ (Xs * v[:, None]) + np.eye(X.shape[1]) / gamma
     A_inv = np.linalg.inv(A)
     ws = A_inv @ (Xs.T @ (v * y))
-    cov = A_inv @ (Xs.T @ (Xs * (v ** 2)[:, None])) @ A_inv
+    cov = A_inv @ (Xs.T @ (Xs * (v**2)[:, None])) @ A_inv
     return ws / scale, cov / np.outer(scale, scale)
 
 
-def lssvm_dual_bias_free(X: np.ndarray, y: np.ndarray, gamma: float,
-                         weights: np.ndarray | None = None) -> np.ndarray:
+def lssvm_dual_bias_free(X: np.ndarray, y: np.ndarray, gamma: float, weights: np.ndarray | None = None) -> np.ndarray:
     """Bias-free dual on unit-RMS columns; returns w in original units (tests prove primal == dual)."""
     scale = column_scales(X)
     Xs = X / scale
@@ -109,8 +109,7 @@ class LSSVM(RegressionEstimator):
         w[constant] = 0.0  # sum(a) = 0 makes them zero; remove the round-off (~1e-13)
         Xc = X - X.mean(axis=0)
         cov = np.linalg.pinv(Xc.T @ Xc + np.eye(X.shape[1]) / self.gamma)
-        return Solution(w=w, cov=cov, info={"gamma": self.gamma, "bias": b, "solver": solver},
-                        residual=y - X @ w - b)
+        return Solution(w=w, cov=cov, info={"gamma": self.gamma, "bias": b, "solver": solver}, residual=y - X @ w - b)
 
 
 class RLSSVM(RegressionEstimator):

@@ -42,6 +42,7 @@ parameter within 1 % of a physical bound is reported ``at_bound`` (T1 = 999 s of
 is a search that ran off along the K, T1, alpha -> infinity ridge of a window
 no model fits, not a hull).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -55,15 +56,15 @@ from ..signals import noise_level
 from ..structure import Structure
 from .base import Estimate, Estimator, finish_estimate, fit_substeps
 
-MAX_INTERVALS = 64          # shooting intervals per window at most (each adds 2-3 unknowns)
+MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
-MIN_INTERVAL_SAMPLES = 50   # shorter intervals are not split further
+MIN_INTERVAL_SAMPLES = 50  # shorter intervals are not split further
 VALLEY_SHARES = (0.03, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the starts along the T2 = T3 valley (nomoto2)
-AT_BOUND_SHARE = 0.01       # within 1 % of a bound's value is on it (T1 = 999 s of 1000 s: a search
-                             # running off along the K, T1, alpha -> infinity ridge, not a hull)
+AT_BOUND_SHARE = 0.01  # within 1 % of a bound's value is on it (T1 = 999 s of 1000 s: a search
+# running off along the K, T1, alpha -> infinity ridge, not a hull)
 RESCUE_ITERATIONS_FACTOR = 2  # a search not converged in max_iterations goes on this many times longer
-RESCUE_MAX_COST = 4.0         # ... when its mean squared residual is within this many noise variances
-SPARSE_INTERVALS = 12       # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
+RESCUE_MAX_COST = 4.0  # ... when its mean squared residual is within this many noise variances
+SPARSE_INTERVALS = 12  # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
 
 
 def shooting_intervals(segments, samples_per_interval: int) -> tuple[tuple[int, int], ...]:
@@ -87,14 +88,16 @@ class LeastSquaresResult:
     success: bool
 
 
-def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterations: int,
-                                tolerance: float = 1e-6, gentle: bool = False) -> LeastSquaresResult:
+def bounded_levenberg_marquardt(
+    residual, jacobian, x0, lower, upper, max_iterations: int, tolerance: float = 1e-6, gentle: bool = False
+) -> LeastSquaresResult:
     """Levenberg-Marquardt with Marquardt's diagonal scaling on the normal equations, bounds by
     projection (a parameter at a bound whose gradient points outward is held there).
 
     The normal equations are (p x p) with p the unknowns, so an iteration costs the
     Jacobian's simulations and almost nothing else (``jacobian`` may return a scipy sparse
-    matrix). It stops when a step gains less than ``tolerance`` of the cost (far below the chi-square scatter of the cost, 1/sqrt(N)) or less
+    matrix). It stops when a step gains less than ``tolerance`` of the cost (far below the
+    chi-square scatter of the cost, 1/sqrt(N)) or less
     than ``CHI_SQUARE_TOLERANCE``: the residuals are in noise units, so such a step moves the
     parameters by a tenth of a standard error or less. The damping lam grows tenfold on a
     rejected step and shrinks tenfold on an accepted one; ``gentle`` (for a search that crawls
@@ -107,7 +110,7 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
     cost = float(f @ f)
     lam, converged = 1e-3, False
     J = jacobian(x, f)
-    for iteration in range(1, max_iterations + 1):
+    for iteration in range(1, max_iterations + 1):  # noqa: B007 (the count is returned)
         g, A = J.T @ f, _dense(J.T @ J)
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         d = np.maximum(np.diag(A)[free], 1e-12)
@@ -129,7 +132,7 @@ def bounded_levenberg_marquardt(residual, jacobian, x0, lower, upper, max_iterat
             lam *= grow
             grow = grow * 2.0 if gentle else grow
         if not improved:
-            converged = True   # no descent left at this precision
+            converged = True  # no descent left at this precision
             break
         small_step = np.all(np.abs(x_new - x) <= tolerance * (np.abs(x) + 1e-3))
         small_gain = cost - cost_new <= max(tolerance * cost, CHI_SQUARE_TOLERANCE)
@@ -277,8 +280,7 @@ class OutputError(Estimator):
         weigh = self.residual_weighting(structure, dataset, params0, s_psi, s_r, intervals)
         n_state = 3 if structure.order == 2 else 2
         bias0 = structure.yaw_rate_bias(params0)
-        states0 = np.array([[dataset.heading[a], dataset.yaw_rate[a] - bias0, 0.0][:n_state]
-                            for a, _ in intervals])
+        states0 = np.array([[dataset.heading[a], dataset.yaw_rate[a] - bias0, 0.0][:n_state] for a, _ in intervals])
         fixed = {n: params0[n] for n in structure.fixed_names}
 
         def unpack(x):
@@ -325,7 +327,7 @@ class OutputError(Estimator):
                 points.append(xs)
             for c in range(n_state):
                 xs = x.copy()
-                xs[p + c::n_state] += steps[p + c::n_state]
+                xs[p + c :: n_state] += steps[p + c :: n_state]
                 points.append(xs)
             diff = residuals(points, fit_substeps(h, unpack(x)[0])) - f0
             values = np.empty(columns.shape)
@@ -341,7 +343,8 @@ class OutputError(Estimator):
         lo = np.concatenate([lower, np.full(states0.size, -np.inf)])
         hi = np.concatenate([upper, np.full(states0.size, np.inf)])
         guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0) + [
-            np.array([structure.clip_to_bounds(dict(params0, **s))[n] for n in names]) for s in starts]
+            np.array([structure.clip_to_bounds(dict(params0, **s))[n] for n in names]) for s in starts
+        ]
         points = [np.clip(np.concatenate([g, states0.ravel()]), lo, hi) for g in guesses]
         substeps = max(fit_substeps(h, unpack(x)[0]) for x in points)
         x0 = points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))]
@@ -362,32 +365,56 @@ class OutputError(Estimator):
         robust = huber_weights(residual(x0), dataset.n_samples)
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
         iterations = result.iterations
-        if (not result.success and self._in_valley_foot(names, result.x[:p])
-                and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun)):
+        if (
+            not result.success
+            and self._in_valley_foot(names, result.x[:p])
+            and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun)
+        ):
             # a model that explains the data to near its noise, crawling up the T2 = T3 valley from
             # its foot: jump along it and search on gently (a model that misses the motion,
             # residuals far above the noise, is not helped by more search)
-            result = bounded_levenberg_marquardt(residual, jacobian, along_valley(result.x), lo, hi,
-                                                 RESCUE_ITERATIONS_FACTOR * self.max_iterations, gentle=True)
+            result = bounded_levenberg_marquardt(
+                residual,
+                jacobian,
+                along_valley(result.x),
+                lo,
+                hi,
+                RESCUE_ITERATIONS_FACTOR * self.max_iterations,
+                gentle=True,
+            )
             iterations += result.iterations
         params, _ = unpack(result.x)
-        std = parameter_std_errors(result.jac, result.fun, dataset.n_samples, p,
-                                   bandwidth=self.bandwidth(intervals))
+        std = parameter_std_errors(result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(intervals))
         std_errors = {n: float(s) for n, s in zip(names, std)}
         std_errors.update({n: 0.0 for n in structure.fixed_names})
-        flags = [f for f in first.flags if not f.endswith("_out_of_bounds") and not f.startswith("at_bound:")
-                 and f not in ("complex_time_constants", "diverged")]  # the start's, not this fit's
+        flags = [
+            f
+            for f in first.flags
+            if not f.endswith("_out_of_bounds")
+            and not f.startswith("at_bound:")
+            and f not in ("complex_time_constants", "diverged")
+        ]  # the start's, not this fit's
         physical = structure.bounds(names)  # the data's stability limit of alpha is no physical bound
-        at_bound = [n for n, v, l, u in zip(names, result.x, *physical)
-                    if any(np.isfinite(b) and np.isclose(v, b, rtol=AT_BOUND_SHARE, atol=1e-6 * max(1, abs(b)))
-                           for b in (l, u))]
+        at_bound = [
+            n
+            for n, v, lo, hi in zip(names, result.x, *physical)
+            if any(
+                np.isfinite(b) and np.isclose(v, b, rtol=AT_BOUND_SHARE, atol=1e-6 * max(1, abs(b))) for b in (lo, hi)
+            )
+        ]
         flags += [f"at_bound:{n}" for n in at_bound]
         if not result.success:
             flags.append("oe_not_converged")
-        info = {"start": first.method, "start_parameters": first.parameters,
-                "noise_heading": s_psi, "noise_yaw_rate": s_r, "iterations": iterations,
-                "simulations": simulations,
-                "shooting_intervals": len(intervals), "shooting_s": self.shooting_s,
-                "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
-                "start_info": {k: v for k, v in first.info.items() if k != "excitation"}}
+        info = {
+            "start": first.method,
+            "start_parameters": first.parameters,
+            "noise_heading": s_psi,
+            "noise_yaw_rate": s_r,
+            "iterations": iterations,
+            "simulations": simulations,
+            "shooting_intervals": len(intervals),
+            "shooting_s": self.shooting_s,
+            "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
+            "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
+        }
         return finish_estimate(structure, dataset, self.name, params, std_errors, flags, info)

@@ -33,6 +33,7 @@ fixed at the starting estimate (its dependence on theta is second order).
 With a noise-free rudder the gain vanishes and this is the plain output-error
 fit.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -55,8 +56,9 @@ class PredictionError(OutputError):
 
         h = dataset.sample_time
         s_delta = noise_level(dataset.rudder, np.radians(0.001))
-        kalman = innovation_filter(noise_model(structure.order, params0, h, fit_substeps(h, params0),
-                                               s_delta, s_psi, s_r))
+        kalman = innovation_filter(
+            noise_model(structure.order, params0, h, fit_substeps(h, params0), s_delta, s_psi, s_r)
+        )
 
         def weigh(psi_err, r_err):
             errors = np.column_stack([psi_err, r_err])

@@ -13,6 +13,7 @@ k largest: w_s = sum_{i<=k} v_i (u_i'y) / s_i, with k chosen by
 
 The chosen k and the rule are reported in the estimate's info.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -68,6 +69,8 @@ class TLSSVM(RegressionEstimator):
         k = truncation_level(s, beta, len(y), max(floor, 0.0), self.rule)
         ws = Vt[:k].T @ (beta[:k] / s[:k])
         cov = (Vt[:k].T / s[:k] ** 2) @ Vt[:k]
-        return Solution(w=ws / scale, cov=cov / np.outer(scale, scale),
-                        info={"truncation": k, "of": len(s), "rule": self.rule,
-                              "singular_values": [float(v) for v in s]})
+        return Solution(
+            w=ws / scale,
+            cov=cov / np.outer(scale, scale),
+            info={"truncation": k, "of": len(s), "rule": self.rule, "singular_values": [float(v) for v in s]},
+        )

@@ -18,6 +18,7 @@ Adaptive PSO: each particle's inertia is set from its fitness rank
 mutation re-draws one coordinate of a random particle when the swarm's
 spread collapses, against premature convergence. Deterministic for a seed.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,9 +27,13 @@ from .base import RegressionEstimator, Solution
 from .lssvm import column_scales, ridge_primal
 
 CHUNK_ROWS = 4096  # rows of the regression per batched product (the swarm's weights stay in cache)
-BOUNDS = np.array([[0.5, 4.0],    # c1: residuals below c1*s keep full weight
-                   [0.5, 8.0],    # c2 - c1: width of the down-weighting ramp
-                   [2.0, 9.0]])   # log10 gamma
+BOUNDS = np.array(
+    [
+        [0.5, 4.0],  # c1: residuals below c1*s keep full weight
+        [0.5, 8.0],  # c2 - c1: width of the down-weighting ramp
+        [2.0, 9.0],
+    ]
+)  # log10 gamma
 
 
 def robust_weights(standardised: np.ndarray, c1: np.ndarray, c2: np.ndarray) -> np.ndarray:
@@ -81,8 +86,9 @@ class SwarmObjective:
         return np.mean(np.partition(err2, keep - 1, axis=1)[:, :keep], axis=1)
 
 
-def adaptive_pso(objective, bounds: np.ndarray, particles: int = 16, iterations: int = 12,
-                 seed: int = 0, mutation_rate: float = 0.2) -> tuple[np.ndarray, float, dict]:
+def adaptive_pso(
+    objective, bounds: np.ndarray, particles: int = 16, iterations: int = 12, seed: int = 0, mutation_rate: float = 0.2
+) -> tuple[np.ndarray, float, dict]:
     """Minimise a batched objective over a box; returns best point, value and a trace."""
     rng = np.random.default_rng(seed)
     lo, hi = bounds[:, 0], bounds[:, 1]
@@ -97,7 +103,7 @@ def adaptive_pso(objective, bounds: np.ndarray, particles: int = 16, iterations:
     history = [gbest_f]
     for _ in range(iterations):
         rank = np.argsort(np.argsort(f)) / max(particles - 1, 1)
-        inertia = 0.4 + 0.5 * rank          # adaptive: 0.4 (best) .. 0.9 (worst)
+        inertia = 0.4 + 0.5 * rank  # adaptive: 0.4 (best) .. 0.9 (worst)
         r1, r2 = rng.random(x.shape), rng.random(x.shape)
         v = inertia[:, None] * v + 1.5 * r1 * (pbest - x) + 1.5 * r2 * (gbest - x)
         v = np.clip(v, -(hi - lo) / 2, (hi - lo) / 2)
@@ -129,8 +135,14 @@ class RWLSSVM(RegressionEstimator):
 
     name = "rwlssvm"
 
-    def __init__(self, particles: int = 16, iterations: int = 12, seed: int = 0,
-                 block_s: float = 5.0, differentiation: str = "savgol"):
+    def __init__(
+        self,
+        particles: int = 16,
+        iterations: int = 12,
+        seed: int = 0,
+        block_s: float = 5.0,
+        differentiation: str = "savgol",
+    ):
         super().__init__(differentiation)
         self.particles, self.iterations, self.seed, self.block_s = particles, iterations, seed, block_s
         self._sample_time = 0.1
@@ -149,6 +161,16 @@ class RWLSSVM(RegressionEstimator):
         weights = robust_weights(e / robust_scale(e), np.array([c1]), np.array([c2]))[0]
         w, cov = ridge_primal(X, y, gamma, weights)
         residual = np.sqrt(weights) * (y - X @ w)
-        return Solution(w=w, cov=cov, residual=residual,
-                        info={"gamma": gamma, "c1": c1, "c2": c2, "held_out_mse": best_f,
-                              "downweighted": int(np.sum(weights < 1.0)), "pso": trace})
+        return Solution(
+            w=w,
+            cov=cov,
+            residual=residual,
+            info={
+                "gamma": gamma,
+                "c1": c1,
+                "c2": c2,
+                "held_out_mse": best_f,
+                "downweighted": int(np.sum(weights < 1.0)),
+                "pso": trace,
+            },
+        )

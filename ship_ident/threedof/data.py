@@ -5,6 +5,7 @@ name or synonym as for the Nomoto model: ``u``/``v`` also work, ``--columns`` na
 holds the Float64 rudder, heading and yaw-rate topics (or an Imu topic) and the body-fixed velocity
 as a ``nav_msgs/msg/Odometry`` or ``geometry_msgs/msg/TwistStamped`` topic (``io.velocity_samples``).
 """
+
 from __future__ import annotations
 
 import csv
@@ -14,19 +15,18 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import DataError, resample_signals
-from ..io import (FLOAT64, THREEDOF_SYNONYMS, TWIST_STAMPED, BagWriter, Topics, csv_column_map,
-                  read_samples, typestore)
+from ..io import FLOAT64, THREEDOF_SYNONYMS, TWIST_STAMPED, BagWriter, Topics, csv_column_map, read_samples, typestore
 from .model import Record
 
 DEFAULT_VELOCITY_TOPIC = "/usv/velocity"
+VELOCITY_TOPICS = Topics(velocity=DEFAULT_VELOCITY_TOPIC)  # the default topics with the velocity input
 SIGNALS = ("rudder", "heading", "yaw_rate", "surge", "sway")
 CSV_HEADER = ("t", "rudder", "heading", "yaw_rate", "surge_speed", "sway_speed")
 SIGNALS_CSV = tuple(THREEDOF_SYNONYMS)  # t and the signals
 MIN_RECORD_S = 5.0  # s: a stretch between gaps shorter than this is too short to smooth and fit
 
 
-def load_records(path, topics: Topics = Topics(velocity=DEFAULT_VELOCITY_TOPIC),
-                 sample_time: float = 0.1) -> list[Record]:
+def load_records(path, topics: Topics = VELOCITY_TOPICS, sample_time: float = 0.1) -> list[Record]:
     """A bag or CSV file as 3-DOF Records on a uniform grid, one per stretch between gaps (heading
     unwrapped); each Record's meta names its source and, for a CSV, the columns read."""
     if not topics.velocity:
@@ -41,10 +41,19 @@ def load_records(path, topics: Topics = Topics(velocity=DEFAULT_VELOCITY_TOPIC),
     meta = {"source": str(path)}
     if Path(path).suffix.lower() in (".csv", ".txt"):
         meta["columns"] = csv_column_map(path, dict(topics.csv_columns), THREEDOF_SYNONYMS, SIGNALS_CSV)
-    records = [Record(time=time[a:b], surge=values["surge"][a:b], sway=values["sway"][a:b],
-                      yaw_rate=values["yaw_rate"][a:b], heading=values["heading"][a:b],
-                      rudder=values["rudder"][a:b], meta=meta)
-               for a, b in segments if (b - a - 1) * sample_time >= MIN_RECORD_S]
+    records = [
+        Record(
+            time=time[a:b],
+            surge=values["surge"][a:b],
+            sway=values["sway"][a:b],
+            yaw_rate=values["yaw_rate"][a:b],
+            heading=values["heading"][a:b],
+            rudder=values["rudder"][a:b],
+            meta=meta,
+        )
+        for a, b in segments
+        if (b - a - 1) * sample_time >= MIN_RECORD_S
+    ]
     if not records:
         raise DataError(f"{path} has no stretch of {MIN_RECORD_S:g} s without gaps; record longer runs")
     return records
@@ -71,12 +80,16 @@ def write_record(record: Record, path, fmt: str = "csv", velocity_topic: str = D
     topics = Topics()
     with BagWriter(path, fmt) as writer:
         for i, t in enumerate(record.time):
-            for topic, value in ((topics.rudder, record.rudder[i]), (topics.heading, heading[i]),
-                                 (topics.yaw_rate, record.yaw_rate[i])):
+            for topic, value in (
+                (topics.rudder, record.rudder[i]),
+                (topics.heading, heading[i]),
+                (topics.yaw_rate, record.yaw_rate[i]),
+            ):
                 writer.write(topic, FLOAT64, Float64(data=float(value)), float(t))
             sec, nanosec = divmod(int(round(float(t) * 1e9)), 1_000_000_000)
             header = Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id="base_link")
             twist = types["geometry_msgs/msg/Twist"](
                 linear=Vector3(x=float(record.surge[i]), y=-float(record.sway[i]), z=0.0),
-                angular=Vector3(x=0.0, y=0.0, z=-float(record.yaw_rate[i])))
+                angular=Vector3(x=0.0, y=0.0, z=-float(record.yaw_rate[i])),
+            )
             writer.write(velocity_topic, TWIST_STAMPED, Twist(header=header, twist=twist), float(t))

@@ -1,10 +1,10 @@
 """KVLCC2 free-running records of MARIN (SIMMAN 2008) as 3-DOF Records."""
+
 from __future__ import annotations
 
 import numpy as np
 
 from .model import Record
-
 
 
 def load_marin_raw(path: str) -> Record:
@@ -30,11 +30,16 @@ def load_marin_raw(path: str) -> Record:
     step, start = np.polyfit(index, data[:, 0], 1)
     psi = np.radians(data[:, 4])
     x_dot, y_dot = data[:, 5], data[:, 6]
-    return Record(time=start + step * index,
-                  surge=x_dot * np.cos(psi) + y_dot * np.sin(psi),
-                  sway=-x_dot * np.sin(psi) + y_dot * np.cos(psi),
-                  yaw_rate=np.radians(data[:, 8]), heading=psi, rudder=-np.radians(data[:, 9]),
-                  propeller_rate=data[:, 10] / 60.0, meta={"source": str(path)})
+    return Record(
+        time=start + step * index,
+        surge=x_dot * np.cos(psi) + y_dot * np.sin(psi),
+        sway=-x_dot * np.sin(psi) + y_dot * np.cos(psi),
+        yaw_rate=np.radians(data[:, 8]),
+        heading=psi,
+        rudder=-np.radians(data[:, 9]),
+        propeller_rate=data[:, 10] / 60.0,
+        meta={"source": str(path)},
+    )
 
 
 def approach_speed(record: Record, duration: float = 3.0) -> float:

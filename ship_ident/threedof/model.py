@@ -34,6 +34,7 @@ Regressors (``X_TERMS``, ``YN_TERMS``; ``d`` = delta, ``u`` = u'):
 Sign convention (NED): u forward, v to starboard, r and heading clockwise
 seen from above, positive rudder turns the ship to starboard (r > 0).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -95,8 +96,23 @@ def _accelerations(u, v, r, d, a, b, c, length, speed0, phi_x, phi_yn):
 
 
 @njit(cache=True)
-def _integrate(a, b, c, length, speed0, sample_time, command, u0, v0, r0, psi0, substeps,
-               zigzag_amplitude, rudder_rate, rudder_limit):
+def _integrate(
+    a,
+    b,
+    c,
+    length,
+    speed0,
+    sample_time,
+    command,
+    u0,
+    v0,
+    r0,
+    psi0,
+    substeps,
+    zigzag_amplitude,
+    rudder_rate,
+    rudder_limit,
+):
     """RK4 over samples of the state (u, v, r, psi); the rudder is linear within each sample.
 
     Rudder: the command (rad) passes a steering gear of rate ``rudder_rate`` (rad/s)
@@ -141,23 +157,27 @@ def _integrate(a, b, c, length, speed0, sample_time, command, u0, v0, r0, psi0, 
             dc = d0 + ((s + 1.0) / substeps) * (d1 - d0)
             k1u, k1v, k1r = _accelerations(u, v, r, da, a, b, c, length, speed0, phi_x, phi_yn)
             k1p = r
-            k2u, k2v, k2r = _accelerations(u + 0.5 * h * k1u, v + 0.5 * h * k1v, r + 0.5 * h * k1r, db,
-                                           a, b, c, length, speed0, phi_x, phi_yn)
+            k2u, k2v, k2r = _accelerations(
+                u + 0.5 * h * k1u, v + 0.5 * h * k1v, r + 0.5 * h * k1r, db, a, b, c, length, speed0, phi_x, phi_yn
+            )
             k2p = r + 0.5 * h * k1r
-            k3u, k3v, k3r = _accelerations(u + 0.5 * h * k2u, v + 0.5 * h * k2v, r + 0.5 * h * k2r, db,
-                                           a, b, c, length, speed0, phi_x, phi_yn)
+            k3u, k3v, k3r = _accelerations(
+                u + 0.5 * h * k2u, v + 0.5 * h * k2v, r + 0.5 * h * k2r, db, a, b, c, length, speed0, phi_x, phi_yn
+            )
             k3p = r + 0.5 * h * k2r
-            k4u, k4v, k4r = _accelerations(u + h * k3u, v + h * k3v, r + h * k3r, dc,
-                                           a, b, c, length, speed0, phi_x, phi_yn)
+            k4u, k4v, k4r = _accelerations(
+                u + h * k3u, v + h * k3v, r + h * k3r, dc, a, b, c, length, speed0, phi_x, phi_yn
+            )
             k4p = r + h * k3r
             u += h * (k1u + 2 * k2u + 2 * k3u + k4u) / 6.0
             v += h * (k1v + 2 * k2v + 2 * k3v + k4v) / 6.0
             r += h * (k1r + 2 * k2r + 2 * k3r + k4r) / 6.0
             psi += h * (k1p + 2 * k2p + 2 * k3p + k4p) / 6.0
         if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(r)) or not (
-                1e-6 < u * u + v * v < DIVERGED_SPEED_RATIO ** 2 * speed0 * speed0):
-            states[i + 1:] = np.nan
-            rudder[i + 1:] = command[i + 1:]
+            1e-6 < u * u + v * v < DIVERGED_SPEED_RATIO**2 * speed0 * speed0
+        ):
+            states[i + 1 :] = np.nan
+            rudder[i + 1 :] = command[i + 1 :]
             break
     return states, rudder
 
@@ -187,17 +207,54 @@ def _flip_odd_in_rudder(derivatives: dict) -> dict:
 
 # Mariner class hydrodynamic derivatives (prime, 1e-5 units dropped), Fossen 2011 / MSS mariner.m,
 # after Chislett & Strom-Tejsen (1965); rudder sign converted to ours.
-MARINER_DERIVATIVES = _flip_odd_in_rudder({
-    "Xudot": -42e-5, "Yvdot": -748e-5, "Yrdot": -9.354e-5, "Nvdot": 4.646e-5, "Nrdot": -43.8e-5,
-    "Xu": -184e-5, "Xuu": -110e-5, "Xuuu": -215e-5, "Xvv": -899e-5, "Xrr": 18e-5,
-    "Xdd": -95e-5, "Xudd": -190e-5, "Xvd": 93e-5, "Xuvd": 93e-5,
-    "Yv": -1160e-5, "Yr": -499e-5, "Yvvv": -8078e-5, "Yvvr": 15356e-5, "Yvu": -1160e-5,
-    "Yru": -499e-5, "Yd": 278e-5, "Yddd": -90e-5, "Yud": 556e-5, "Yuud": 278e-5,
-    "Yvdd": -4e-5, "Yvvd": 1190e-5, "Y0": -4e-5, "Y0u": -8e-5, "Y0uu": -4e-5,
-    "Nv": -264e-5, "Nr": -166e-5, "Nvvv": 1636e-5, "Nvvr": -5483e-5, "Nvu": -264e-5,
-    "Nru": -166e-5, "Nd": -139e-5, "Nddd": 45e-5, "Nud": -278e-5, "Nuud": -139e-5,
-    "Nvdd": 13e-5, "Nvvd": -489e-5, "N0": 3e-5, "N0u": 6e-5, "N0uu": 3e-5,
-})
+MARINER_DERIVATIVES = _flip_odd_in_rudder(
+    {
+        "Xudot": -42e-5,
+        "Yvdot": -748e-5,
+        "Yrdot": -9.354e-5,
+        "Nvdot": 4.646e-5,
+        "Nrdot": -43.8e-5,
+        "Xu": -184e-5,
+        "Xuu": -110e-5,
+        "Xuuu": -215e-5,
+        "Xvv": -899e-5,
+        "Xrr": 18e-5,
+        "Xdd": -95e-5,
+        "Xudd": -190e-5,
+        "Xvd": 93e-5,
+        "Xuvd": 93e-5,
+        "Yv": -1160e-5,
+        "Yr": -499e-5,
+        "Yvvv": -8078e-5,
+        "Yvvr": 15356e-5,
+        "Yvu": -1160e-5,
+        "Yru": -499e-5,
+        "Yd": 278e-5,
+        "Yddd": -90e-5,
+        "Yud": 556e-5,
+        "Yuud": 278e-5,
+        "Yvdd": -4e-5,
+        "Yvvd": 1190e-5,
+        "Y0": -4e-5,
+        "Y0u": -8e-5,
+        "Y0uu": -4e-5,
+        "Nv": -264e-5,
+        "Nr": -166e-5,
+        "Nvvv": 1636e-5,
+        "Nvvr": -5483e-5,
+        "Nvu": -264e-5,
+        "Nru": -166e-5,
+        "Nd": -139e-5,
+        "Nddd": 45e-5,
+        "Nud": -278e-5,
+        "Nuud": -139e-5,
+        "Nvdd": 13e-5,
+        "Nvvd": -489e-5,
+        "N0": 3e-5,
+        "N0u": 6e-5,
+        "N0uu": 3e-5,
+    }
+)
 
 
 @dataclass(frozen=True)
@@ -211,31 +268,30 @@ class Vessel:
 
     name: str
     description: str
-    length: float            # m, Lpp
-    beam: float              # m
-    draught: float           # m
+    length: float  # m, Lpp
+    beam: float  # m
+    draught: float  # m
     block_coefficient: float
-    mass: float              # kg
-    x_g: float               # m, centre of gravity forward of midship
-    inertia_z: float         # kg m^2
-    speed: float             # m/s, approach speed U0
-    rudder_rate: float = np.radians(20.0)   # rad/s
+    mass: float  # kg
+    x_g: float  # m, centre of gravity forward of midship
+    inertia_z: float  # kg m^2
+    speed: float  # m/s, approach speed U0
+    rudder_rate: float = np.radians(20.0)  # rad/s
     rudder_limit: float = np.radians(35.0)  # rad
     water_density: float = RHO_FRESH_WATER  # kg/m^3
     derivatives: dict = field(default_factory=dict)
 
-    def coefficients(self) -> "Coefficients":
+    def coefficients(self) -> Coefficients:
         """The true regression coefficients a, b, c of the acceleration form (needs derivatives)."""
         if not self.derivatives:
             raise ValueError(f"vessel {self.name!r} has no hydrodynamic derivatives to simulate with")
         half_rho = 0.5 * self.water_density
-        m = self.mass / (half_rho * self.length ** 3)
-        iz = self.inertia_z / (half_rho * self.length ** 5)
+        m = self.mass / (half_rho * self.length**3)
+        iz = self.inertia_z / (half_rho * self.length**5)
         xg = self.x_g / self.length
         der = dict({"Xrv": m}, **self.derivatives)
         m11 = m - der["Xudot"]
-        mass_yn = np.array([[m - der["Yvdot"], m * xg - der["Yrdot"]],
-                            [m * xg - der["Nvdot"], iz - der["Nrdot"]]])
+        mass_yn = np.array([[m - der["Yvdot"], m * xg - der["Yrdot"]], [m * xg - der["Nvdot"], iz - der["Nrdot"]]])
         x = np.array([der["X" + t] for t in X_TERMS])
         yn = np.array([[der["Y" + t] for t in YN_TERMS], [der["N" + t] for t in YN_TERMS]])
         b, c = np.linalg.solve(mass_yn, yn)
@@ -244,19 +300,36 @@ class Vessel:
 
 DTC_SCALE = 89.11  # DTC model scale (Lpp 355 m / 3.984 m)
 KVLCC2_SCALE = 45.714
-KVLCC2_MASS = 3.27 * KVLCC2_SCALE ** 3 * 1025.0  # kg: model displacement 3.27 m^3 scaled, sea water
+KVLCC2_MASS = 3.27 * KVLCC2_SCALE**3 * 1025.0  # kg: model displacement 3.27 m^3 scaled, sea water
 VESSELS = {
     "dtc": Vessel(
-        "dtc", "Duisburg Test Case container ship model (seed 000 Table 2) with Mariner-class "
+        "dtc",
+        "Duisburg Test Case container ship model (seed 000 Table 2) with Mariner-class "
         "derivatives as stand-in hydrodynamics",
-        length=3.984, beam=0.572, draught=0.163, block_coefficient=0.661, mass=242.8, x_g=-0.052,
-        inertia_z=219.0, speed=1.2, rudder_rate=np.radians(2.32) * np.sqrt(DTC_SCALE),
-        derivatives=MARINER_DERIVATIVES),
+        length=3.984,
+        beam=0.572,
+        draught=0.163,
+        block_coefficient=0.661,
+        mass=242.8,
+        x_g=-0.052,
+        inertia_z=219.0,
+        speed=1.2,
+        rudder_rate=np.radians(2.32) * np.sqrt(DTC_SCALE),
+        derivatives=MARINER_DERIVATIVES,
+    ),
     "kvlcc2": Vessel(
-        "kvlcc2", "KVLCC2 tanker, full scale (MARIN free-running tests, SIMMAN 2008; model 1:45.714)",
-        length=320.0, beam=58.0, draught=20.8, block_coefficient=0.81, mass=KVLCC2_MASS,
-        x_g=11.1, inertia_z=KVLCC2_MASS * (0.25 * 320.0) ** 2, speed=7.97,  # radius of gyration 0.25 Lpp
-        water_density=1025.0),
+        "kvlcc2",
+        "KVLCC2 tanker, full scale (MARIN free-running tests, SIMMAN 2008; model 1:45.714)",
+        length=320.0,
+        beam=58.0,
+        draught=20.8,
+        block_coefficient=0.81,
+        mass=KVLCC2_MASS,
+        x_g=11.1,
+        inertia_z=KVLCC2_MASS * (0.25 * 320.0) ** 2,
+        speed=7.97,  # radius of gyration 0.25 Lpp
+        water_density=1025.0,
+    ),
 }
 
 
@@ -269,7 +342,7 @@ class Coefficients:
     yaw: np.ndarray
     length: float
     speed: float
-    std_errors: dict | None = None   # DOF -> array like the coefficients
+    std_errors: dict | None = None  # DOF -> array like the coefficients
 
     def vector(self, dof: str) -> np.ndarray:
         return getattr(self, dof)
@@ -279,8 +352,7 @@ class Coefficients:
         for dof in DOFS:
             terms = X_TERMS if dof == "surge" else YN_TERMS
             std = self.std_errors[dof] if self.std_errors else np.full(len(terms), np.nan)
-            out[dof] = {t: {"value": float(w), "std_error": float(s)}
-                        for t, w, s in zip(terms, self.vector(dof), std)}
+            out[dof] = {t: {"value": float(w), "std_error": float(s)} for t, w, s in zip(terms, self.vector(dof), std)}
         return out
 
 
@@ -312,7 +384,7 @@ class Record:
     def __len__(self) -> int:
         return len(self.time)
 
-    def head(self, n: int) -> "Record":
+    def head(self, n: int) -> Record:
         """The first n samples."""
         cut = {k: getattr(self, k)[:n] for k in ("time", "surge", "sway", "yaw_rate", "heading", "rudder")}
         rate = None if self.propeller_rate is None else self.propeller_rate[:n]
@@ -326,30 +398,55 @@ class Record:
 class Noise:
     """Sensor noise standard deviations (SI): the realistic levels of a free-running model test."""
 
-    surge: float = 0.005               # m/s
-    sway: float = 0.005                # m/s
+    surge: float = 0.005  # m/s
+    sway: float = 0.005  # m/s
     yaw_rate: float = np.radians(0.2)  # rad/s
-    heading: float = np.radians(0.1)   # rad
-    rudder: float = np.radians(0.1)    # rad
+    heading: float = np.radians(0.1)  # rad
+    rudder: float = np.radians(0.1)  # rad
 
-    def scaled(self, factor: float) -> "Noise":
+    def scaled(self, factor: float) -> Noise:
         return Noise(*(factor * getattr(self, k) for k in ("surge", "sway", "yaw_rate", "heading", "rudder")))
 
 
-def run_model(coefficients: Coefficients, time: np.ndarray, rudder: np.ndarray, initial: tuple,
-              substeps: int = 4) -> Record:
+def run_model(
+    coefficients: Coefficients, time: np.ndarray, rudder: np.ndarray, initial: tuple, substeps: int = 4
+) -> Record:
     """Integrate the model from ``initial`` = (u, v, r, psi) driven by ``rudder`` (rad, linear between samples)."""
     h = float(np.median(np.diff(time)))
-    states, _ = _integrate(coefficients.surge, coefficients.sway, coefficients.yaw, coefficients.length,
-                           coefficients.speed, h, np.asarray(rudder, float), *map(float, initial), substeps,
-                           0.0, np.inf, np.inf)
-    return Record(time=time, surge=states[:, 0], sway=states[:, 1], yaw_rate=states[:, 2],
-                  heading=states[:, 3], rudder=np.asarray(rudder, float))
+    states, _ = _integrate(
+        coefficients.surge,
+        coefficients.sway,
+        coefficients.yaw,
+        coefficients.length,
+        coefficients.speed,
+        h,
+        np.asarray(rudder, float),
+        *map(float, initial),
+        substeps,
+        0.0,
+        np.inf,
+        np.inf,
+    )
+    return Record(
+        time=time,
+        surge=states[:, 0],
+        sway=states[:, 1],
+        yaw_rate=states[:, 2],
+        heading=states[:, 3],
+        rudder=np.asarray(rudder, float),
+    )
 
 
-def simulate_manoeuvre(vessel: str | Vessel = "dtc", manoeuvre: str = "zigzag", amplitude_deg: float = 20.0,
-                       duration: float = 100.0, sample_time: float = 0.1, noise: float | Noise = 1.0,
-                       seed: int = 0, substeps: int = 4) -> tuple[Record, Record]:
+def simulate_manoeuvre(
+    vessel: str | Vessel = "dtc",
+    manoeuvre: str = "zigzag",
+    amplitude_deg: float = 20.0,
+    duration: float = 100.0,
+    sample_time: float = 0.1,
+    noise: float | Noise = 1.0,
+    seed: int = 0,
+    substeps: int = 4,
+) -> tuple[Record, Record]:
     """Simulate a zigzag (closed loop on heading) or turning circle from a straight run at U0.
 
     ``amplitude_deg`` < 0 starts to port. Returns (noisy measurements, noise-free truth).
@@ -366,14 +463,36 @@ def simulate_manoeuvre(vessel: str | Vessel = "dtc", manoeuvre: str = "zigzag", 
         command[0] = 0.0
     else:
         raise ValueError(f"unknown manoeuvre {manoeuvre!r}; choose zigzag or turning")
-    states, rudder = _integrate(coefficients.surge, coefficients.sway, coefficients.yaw, vessel.length,
-                                vessel.speed, sample_time, command, vessel.speed, 0.0, 0.0, 0.0, substeps,
-                                zigzag, vessel.rudder_rate, vessel.rudder_limit)
-    truth = Record(time=time, surge=states[:, 0], sway=states[:, 1], yaw_rate=states[:, 2],
-                   heading=states[:, 3], rudder=rudder,
-                   meta={"vessel": vessel.name, "manoeuvre": manoeuvre, "amplitude_deg": amplitude_deg})
+    states, rudder = _integrate(
+        coefficients.surge,
+        coefficients.sway,
+        coefficients.yaw,
+        vessel.length,
+        vessel.speed,
+        sample_time,
+        command,
+        vessel.speed,
+        0.0,
+        0.0,
+        0.0,
+        substeps,
+        zigzag,
+        vessel.rudder_rate,
+        vessel.rudder_limit,
+    )
+    truth = Record(
+        time=time,
+        surge=states[:, 0],
+        sway=states[:, 1],
+        yaw_rate=states[:, 2],
+        heading=states[:, 3],
+        rudder=rudder,
+        meta={"vessel": vessel.name, "manoeuvre": manoeuvre, "amplitude_deg": amplitude_deg},
+    )
     noise = Noise().scaled(noise) if not isinstance(noise, Noise) else noise
     rng = np.random.default_rng(seed)
-    noisy = {k: getattr(truth, k) + getattr(noise, k) * rng.standard_normal(n)
-             for k in ("surge", "sway", "yaw_rate", "heading", "rudder")}
+    noisy = {
+        k: getattr(truth, k) + getattr(noise, k) * rng.standard_normal(n)
+        for k in ("surge", "sway", "yaw_rate", "heading", "rudder")
+    }
     return replace(truth, **noisy), truth

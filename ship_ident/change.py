@@ -38,7 +38,7 @@ import numpy as np
 
 from .dataset import Dataset
 from .metrics import effective_sample_fraction
-from .signals import noise_level
+from .signals import SENSOR_RESOLUTION, noise_level
 from .structure import Structure
 
 CONFIRMATIONS = 2  # refits in a row above the ratio before a change is declared
@@ -47,7 +47,7 @@ MIN_SHORT_SAMPLES = 20  # the short test needs at least this many samples
 MEDIAN_OF_CHI2_1 = 0.4549  # median of e^2 / sigma^2 for Gaussian e
 UPPER_QUARTILE_OF_CHI2_1 = 1.3233  # its 75th percentile (a change in the last half of the short
 # test's samples shows there, spikes in a quarter do not)
-MIN_LEVEL = math.radians(0.01) ** 2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
+MIN_LEVEL = SENSOR_RESOLUTION**2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
 # A reference model must be well determined: relative standard errors at most these (a window of
 # steady turning gives a K to 10-25 % and T1 to 60-400 %, and any new rudder motion surprises it).
 REFERENCE_RELATIVE_ERRORS = {"K": 0.05, "T": 0.2, "T1": 0.2}

@@ -48,7 +48,7 @@ from .dataset import DataError, Dataset
 from .effects import EFFECTS, Evidence, StartContext
 from .estimators import Estimate, OutputError, make_estimator
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
-from .signals import Signals, compute_signals, noise_level
+from .signals import SENSOR_RESOLUTION, Signals, compute_signals, noise_level
 from .structure import Structure
 
 DEFAULT_METHOD = "rlssvm+oe"  # cheap start + output-error refinement: the fits dominate the run time
@@ -529,7 +529,7 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
     auto_out = float(np.mean(np.abs(auto[positive]) > bound))
     cross_out = float(np.mean(np.abs(cross) > bound))
     rms = float(np.sqrt(np.mean(residual**2))) if n else np.inf
-    noise = noise_yaw_rate if noise_yaw_rate else noise_level(held_out.yaw_rate, np.radians(0.01))
+    noise = noise_yaw_rate if noise_yaw_rate else noise_level(held_out.yaw_rate, SENSOR_RESOLUTION)
     ratio = rms / noise if noise > 0 else np.inf
     at_noise = bool(ratio <= NOISE_MARGIN)
     return {
@@ -877,8 +877,8 @@ def diagnose(
         parts = [(training, recordings(training, "training"), False), (rest, recordings(rest, "held-out"), True)]
     worst = worst_segments(parts, structure, estimate.parameters, worst_window, before=before)
     noise = {
-        "heading": noise_level(dataset.heading, np.radians(0.01)),
-        "yaw_rate": noise_level(dataset.yaw_rate, np.radians(0.01)),
+        "heading": noise_level(dataset.heading, SENSOR_RESOLUTION),
+        "yaw_rate": noise_level(dataset.yaw_rate, SENSOR_RESOLUTION),
     }
     return Diagnosis(
         dataset=dataset,

@@ -82,9 +82,15 @@ def _rts_segment(psi, r, h, heading_noise, yaw_rate_noise, jerk_psd):
     return xs
 
 
+# The finest angle (rad) or turn rate (rad/s) a compass or rate gyro resolves: the floor under
+# every estimate of their noise.
+SENSOR_RESOLUTION = float(np.radians(0.01))
+MAD_TO_STD = 1.4826  # std of Gaussian noise / its median absolute deviation
+
+
 def robust_std(values: np.ndarray) -> float:
-    """1.4826 * median absolute deviation: the std of Gaussian noise, blind to a few outliers."""
-    return float(1.4826 * np.median(np.abs(values - np.median(values))))
+    """MAD_TO_STD * median absolute deviation: the std of Gaussian noise, blind to a few outliers."""
+    return float(MAD_TO_STD * np.median(np.abs(values - np.median(values))))
 
 
 def noise_level(values: np.ndarray, floor: float) -> float:
@@ -127,8 +133,8 @@ def compute_signals(
     dataset.check_finite()
     h = dataset.sample_time
     n = dataset.n_samples
-    heading_noise = noise_level(dataset.heading, np.radians(0.01))
-    yaw_rate_noise = noise_level(dataset.yaw_rate, np.radians(0.01))
+    heading_noise = noise_level(dataset.heading, SENSOR_RESOLUTION)
+    yaw_rate_noise = noise_level(dataset.yaw_rate, SENSOR_RESOLUTION)
     window_s = smoothing_window(yaw_rate_noise) if window_s is None else window_s
     window = max(5, int(round(window_s / h)) | 1)
     edge = window // 2 + 1
@@ -137,9 +143,9 @@ def compute_signals(
     for a, b in dataset.segments:
         if b - a < 2 * edge + 3:
             continue
-        psi = despike(dataset.heading[a:b], np.radians(0.01))
-        r = despike(dataset.yaw_rate[a:b], np.radians(0.01))
-        d = despike(dataset.rudder[a:b], np.radians(0.01))
+        psi = despike(dataset.heading[a:b], SENSOR_RESOLUTION)
+        r = despike(dataset.yaw_rate[a:b], SENSOR_RESOLUTION)
+        d = despike(dataset.rudder[a:b], SENSOR_RESOLUTION)
         out["delta"][a:b] = _savgol(d, window, h, 0)
         out["delta_dot"][a:b] = _savgol(d, window, h, 1)
         out["heading_rate"][a:b] = _savgol(psi, window, h, 1)

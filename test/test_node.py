@@ -124,7 +124,9 @@ def test_effects_change_at_run_time(env, domain_id, bag):
     after = final_estimate(listener)
     assert "delta_r" not in after["parameters"] and "r_bias" in after["parameters"]
     assert listener.parameters[-1].layout.dim[0].label == "K,T1,T2,T3,r_bias"
-    assert after["fit"]["rmse_yaw_rate"] != before["fit"]["rmse_yaw_rate"]
+    # the bag's gyro reads true (no bias in its truth): the new parameter is estimated, near zero
+    assert abs(math.degrees(after["parameters"]["r_bias"])) < 0.05  # deg/s
+    assert after["stamp"] > before["stamp"]
 
 
 def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):

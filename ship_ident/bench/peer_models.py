@@ -17,7 +17,7 @@ import numpy as np
 from ..estimators import make_estimator
 from ..estimators.lssvm import lssvm_dual_with_bias
 from ..integrate import advance, initial_z
-from ..signals import compute_signals, noise_level
+from ..signals import SENSOR_RESOLUTION, compute_signals, noise_level
 from ..structure import Structure
 
 STRUCTURE = Structure("nomoto2", ["rudder_offset", "cubic_yaw"])
@@ -108,7 +108,10 @@ class ParameterUKF:
         )
         ukf.P = np.diag(np.concatenate([[1e-4, 1e-4, 1e-3], (0.2 * scale) ** 2]))
         ukf.R = np.diag(
-            [noise_level(dataset.heading, np.radians(0.01)) ** 2, noise_level(dataset.yaw_rate, np.radians(0.01)) ** 2]
+            [
+                noise_level(dataset.heading, SENSOR_RESOLUTION) ** 2,
+                noise_level(dataset.yaw_rate, SENSOR_RESOLUTION) ** 2,
+            ]
         )
         ukf.Q = np.diag(np.concatenate([[1e-8, 1e-7, 1e-7], (self.drift * scale) ** 2]))
         trace_t, trace_k = [], []

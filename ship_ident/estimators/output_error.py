@@ -52,7 +52,7 @@ from scipy import sparse
 from scipy.signal import convolve
 
 from ..dataset import Dataset
-from ..signals import noise_level
+from ..signals import SENSOR_RESOLUTION, noise_level, robust_std
 from ..structure import Structure
 from .base import Estimate, Estimator, finish_estimate, fit_substeps
 
@@ -175,12 +175,12 @@ HUBER_THRESHOLD = 5.0  # robust standard deviations beyond which a residual coun
 
 def huber_weights(start_residual: np.ndarray, n_samples: int) -> np.ndarray:
     """Square roots of Huber's IRLS weights min(1, c s / |e|) for the heading and the yaw-rate
-    halves of the start's residual, s = 1.483 MAD per half: isolated sensor spikes (tens of
+    halves of the start's residual, s = their robust std (1.4826 MAD) per half: isolated sensor spikes (tens of
     noise levels) then pull on the fit linearly, not quadratically."""
     weights = np.ones_like(start_residual)
     for half in (slice(0, n_samples), slice(n_samples, 2 * n_samples)):
         e = start_residual[half]
-        scale = 1.483 * np.median(np.abs(e - np.median(e))) or 1.0
+        scale = robust_std(e) or 1.0
         weights[half] = np.minimum(1.0, HUBER_THRESHOLD * scale / np.maximum(np.abs(e), 1e-300))
     return np.sqrt(weights)
 
@@ -273,8 +273,8 @@ class OutputError(Estimator):
         lower, upper = structure.bounds(names, dataset)
         params0 = structure.clip_to_bounds(first.parameters)
         h = dataset.sample_time
-        s_psi = noise_level(dataset.heading, np.radians(0.01))
-        s_r = noise_level(dataset.yaw_rate, np.radians(0.01))
+        s_psi = noise_level(dataset.heading, SENSOR_RESOLUTION)
+        s_r = noise_level(dataset.yaw_rate, SENSOR_RESOLUTION)
         intervals = self.intervals(dataset)
         shots = replace(dataset, segments=intervals)
         weigh = self.residual_weighting(structure, dataset, params0, s_psi, s_r, intervals)

@@ -1,7 +1,7 @@
 """Reconstructed weighted LS-SVM with weights tuned by an adaptive PSO with mutation.
 
 Weights (Suykens' robust LS-SVM) from the residual e of the unweighted
-reconstructed fit, standardised by s = 1.483 MAD(e):
+reconstructed fit, standardised by s = 1.4826 MAD(e):
 
     v_i = 1                          if |e_i/s| <= c1
         = (c2 - |e_i/s|) / (c2 - c1)  if c1 < |e_i/s| <= c2
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..signals import robust_std
 from .base import RegressionEstimator, Solution
 from .lssvm import column_scales, ridge_primal
 
@@ -45,7 +46,7 @@ def robust_weights(standardised: np.ndarray, c1: np.ndarray, c2: np.ndarray) -> 
 
 
 def robust_scale(e: np.ndarray) -> float:
-    return float(1.483 * np.median(np.abs(e - np.median(e)))) or float(np.std(e)) or 1.0
+    return robust_std(e) or float(np.std(e)) or 1.0
 
 
 class SwarmObjective:

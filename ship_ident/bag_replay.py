@@ -22,7 +22,8 @@ import numpy as np
 from .dataset import DataError
 from .io import FLOAT64, BagWriter, Sample, Topics, read_samples, typestore
 from .jsonio import dumps_json
-from .online import OnlineConfig, OnlineIdentifier, RefitRecord, run_schedule
+from .online import OnlineIdentifier, RefitRecord, run_schedule
+from .online_config import OnlineConfig
 
 ESTIMATE_TOPIC = "/ship_ident/estimate"
 PARAMETERS_TOPIC = "/ship_ident/parameters"

@@ -36,7 +36,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .dataset import Dataset
+from .dataset import Dataset, cut_segments
 from .metrics import effective_sample_fraction
 from .signals import SENSOR_RESOLUTION, noise_level
 from .structure import Structure
@@ -51,11 +51,6 @@ MIN_LEVEL = SENSOR_RESOLUTION**2  # (rad/s)^2: no yaw-rate sensor resolves finer
 # A reference model must be well determined: relative standard errors at most these (a window of
 # steady turning gives a K to 10-25 % and T1 to 60-400 %, and any new rudder motion surprises it).
 REFERENCE_RELATIVE_ERRORS = {"K": 0.05, "T": 0.2, "T1": 0.2}
-
-
-def whole_blocks(dataset: Dataset, n: int, offset: int = 0) -> tuple:
-    """Half-open index ranges of whole blocks of n samples inside the dataset's segments."""
-    return tuple((a, a + n) for start, stop in dataset.segments for a in range(start + offset, stop - n + 1, n))
 
 
 def covering_blocks(dataset: Dataset, n: int) -> tuple:
@@ -103,7 +98,9 @@ class ChangeDetector:
         ):
             return
         n = int(round(self.length / dataset.sample_time))
-        blocks = whole_blocks(dataset, n) + whole_blocks(dataset, n, n // 2)
+        blocks = cut_segments(dataset.segments, n, whole=True) + cut_segments(
+            dataset.segments, n, whole=True, offset=n // 2
+        )
         errors = block_errors(structure, params, dataset, blocks)
         if len(errors):
             floor = max(noise_level(dataset.yaw_rate, 0.0) ** 2, MIN_LEVEL)

@@ -17,6 +17,22 @@ class DataError(ValueError):
     """Input data that cannot be used; the message says what is wrong and what to do."""
 
 
+def cut_segments(segments, samples: int, min_samples: int = 1, whole: bool = False, offset: int = 0) -> tuple:
+    """Half-open index ranges that cut each segment ``[a, b)`` into pieces of about ``samples``:
+    near-equal pieces covering the segment (a short segment is one piece), those shorter than
+    ``min_samples`` dropped; or, ``whole``, pieces of exactly ``samples`` from ``offset`` into the
+    segment, the remainder dropped. Free runs, shooting intervals and test blocks never cross a gap."""
+    out = []
+    for a, b in segments:
+        if whole:
+            out += [(s, s + samples) for s in range(a + offset, b - samples + 1, samples)]
+            continue
+        pieces = max(1, int(round((b - a) / samples)))
+        edges = np.linspace(a, b, pieces + 1).round().astype(int)
+        out += [(int(lo), int(hi)) for lo, hi in zip(edges[:-1], edges[1:]) if hi - lo >= min_samples]
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class Dataset:
     """Uniformly sampled steering record.

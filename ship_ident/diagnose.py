@@ -44,9 +44,10 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from .dataset import DataError, Dataset
-from .effects import EFFECTS, Evidence, StartContext
-from .estimators import Estimate, OutputError, make_estimator
+from .dataset import DataError, Dataset, cut_segments
+from .effects import EFFECTS, Evidence, StartContext, heading_harmonics
+from .estimators import Estimate, make_estimator, regression_method
+from .integrate import forcing as yaw_forcing
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
 from .signals import SENSOR_RESOLUTION, Signals, compute_signals, noise_level
 from .structure import Structure
@@ -271,12 +272,7 @@ def split(dataset: Dataset, training_fraction: float = TRAINING_FRACTION) -> tup
 def windows(dataset: Dataset, length_s: float) -> Dataset:
     """The dataset with every segment cut into windows of about ``length_s`` (each its own free run)."""
     step = max(int(round(length_s / dataset.sample_time)), 2)
-    cuts = []
-    for a, b in dataset.segments:
-        count = max(1, int(round((b - a) / step)))
-        edges = np.linspace(a, b, count + 1).round().astype(int)
-        cuts += [(int(s), int(e)) for s, e in zip(edges[:-1], edges[1:]) if e - s >= 2]
-    return replace(dataset, segments=tuple(cuts))
+    return replace(dataset, segments=cut_segments(dataset.segments, step, min_samples=2))
 
 
 def time_constant(parameters: dict) -> float:
@@ -351,12 +347,7 @@ def equation_residual(structure: Structure, parameters: dict, signals: Signals) 
     rudder, gain, tscale = structure.effective_inputs(p, signals.time, signals.delta, signals.speed)
     rudder_rate = np.gradient(rudder, h) if len(rudder) > 1 else np.zeros_like(rudder)
     r = signals.r - structure.yaw_rate_bias(p)
-    forcing = np.zeros_like(r)
-    for effect in structure.effects:
-        for term in effect.forcing_terms(p):
-            value = term.coefficient * r**term.r_power * np.abs(r) ** term.abs_power
-            trig = {1: np.cos, 2: np.sin}.get(term.trig)
-            forcing += value * (trig(term.harmonic * signals.psi) if trig else 1.0)
+    forcing = yaw_forcing(signals.psi, r, [t for e in structure.effects for t in e.forcing_terms(p)])
     if structure.order == 1:
         left = p["T"] * tscale * signals.r_dot + r
         right = p["K"] * gain * rudder
@@ -487,12 +478,7 @@ def residual_follows(held_out: Dataset, residual: np.ndarray, ok: np.ndarray) ->
         "the rudder rate": [np.gradient(held_out.rudder, h)],
         "the turn rate": [r],
         "the turn rate squared (with its sign)": [r * np.abs(r)],
-        "the heading": [
-            np.cos(held_out.heading),
-            np.sin(held_out.heading),
-            np.cos(2 * held_out.heading),
-            np.sin(2 * held_out.heading),
-        ]
+        "the heading": list(heading_harmonics(held_out.heading).values())
         if np.ptp(held_out.heading) > np.pi
         else [held_out.heading],  # a narrow sector: one column
         "the time since the start of each run (a drift)": [since_start],
@@ -617,15 +603,14 @@ def _fit(structure: Structure, training: Dataset, method: str, nested: dict | No
     search from its clipped values ends in a local minimum whose fit residual is 60 times nomoto1's.)"""
     estimator = make_estimator(method)
     structure = physical_speed_law(structure, training)
-    if nested is None or not isinstance(estimator, OutputError):
+    if nested is None or not estimator.uses_starts:
         return estimator.fit(structure, training)
-    start = dict(nested)
-    for effect in structure.effects:
-        start.update({k: v for k, v in effect.neutral().items() if k not in nested})
+    start = structure.neutral_effect_start(nested)
     bare = structure.with_effects(structure.effect_names[:-1])
-    context = StartContext(training, dict(nested), lambda data: estimator.start.fit(bare, data).parameters)
+    regression = make_estimator(regression_method(method))
+    context = StartContext(training, dict(nested), lambda data: regression.fit(bare, data).parameters)
     extra = [dict(start, **s) for s in structure.effects[-1].starts(context)] if structure.effects else []
-    return estimator.refine(structure, training, estimator.start.fit(structure, training), starts=(start, *extra))
+    return estimator.fit(structure, training, starts=(start, *extra))
 
 
 REBASE_GAIN = 0.9  # the model is refitted when a candidate's start lowers its training fit residual this much
@@ -646,13 +631,13 @@ def _rebase(structure: Structure, training: Dataset, method: str, estimate: Esti
         if isinstance(r, Estimate)
     ]
     if (
-        not isinstance(estimator, OutputError)
+        not estimator.uses_starts
         or not starts
         or "cost_ratio" not in estimate.info
         or "oe_not_converged" not in estimate.flags
     ):
         return None
-    refit = estimator.refine(structure, training, estimate, starts=tuple(starts))
+    refit = estimator.fit(structure, training, starts=(estimate.parameters, *starts))
     ratio = refit.info["cost_ratio"]
     return refit if ratio < REBASE_GAIN * estimate.info["cost_ratio"] and ratio < REBASE_AT_NOISE else None
 

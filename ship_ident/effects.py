@@ -50,6 +50,12 @@ class ForcingTerm:
     trig: int = TRIG_NONE
 
 
+def heading_harmonics(psi: np.ndarray) -> dict:
+    """The first two harmonics of the heading psi (rad), cos(k psi) and sin(k psi) for k = 1, 2:
+    a steady wind or current's yaw forcing along the heading, and its regression columns."""
+    return {f"{f.__name__}({k}psi)": f(k * psi) for k in (1, 2) for f in (np.cos, np.sin)}
+
+
 @dataclass
 class Evidence:
     """How strongly the residual points to an effect: a score (larger: stronger) and a sentence.
@@ -286,7 +292,7 @@ class WindYaw(Effect):
         ]
 
     def regressors(self, signals):
-        return {f"{f.__name__}({k}psi)": f(k * signals.psi) for k in (1, 2) for f in (np.cos, np.sin)}
+        return heading_harmonics(signals.psi)
 
     def from_coefficients(self, coefficients, base):
         return {
@@ -298,7 +304,7 @@ class WindYaw(Effect):
     def evidence(self, context):
         e = context.equation_residual
         psi = context.signals.psi
-        C = np.column_stack([np.cos(psi), np.sin(psi), np.cos(2 * psi), np.sin(2 * psi)])
+        C = np.column_stack(list(heading_harmonics(psi).values()))
         C = C - C.mean(axis=0)
         e0 = e - e.mean()
         coef = np.linalg.lstsq(C, e0, rcond=None)[0]

@@ -40,7 +40,7 @@ from pathlib import Path
 from .bag_replay import replay_bag
 from .dataset import DataError
 from .jsonio import dumps_json
-from .online import ConfigError, OnlineConfig
+from .online_config import ConfigError, OnlineConfig
 from .samples import Topics
 
 UNIX_TIME_AFTER_2001 = 1e9  # s: bag stamps above this are wall-clock dates

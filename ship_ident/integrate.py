@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 TRIG_NONE, TRIG_COS, TRIG_SIN = 0, 1, 2
+TERM_FIELDS = ("r_power", "abs_power", "harmonic", "trig")  # integer fields of a forcing term, in kernel order
 RK4_NODES = np.array([0.0, 0.5, 0.5, 1.0])  # stage times within a step, in steps
 
 
@@ -339,6 +340,20 @@ def simulate_kernel(
                 else:
                     alive[lane] = False
     return psi_out, r_out
+
+
+def forcing(psi: np.ndarray, r: np.ndarray, terms) -> np.ndarray:
+    """Yaw forcing (rad/s) of ``terms`` (each with coefficient, r_power, abs_power, harmonic, trig:
+    ``effects.ForcingTerm``) on every sample of heading ``psi`` (rad) and yaw rate ``r`` (rad/s),
+    by the integrator's own evaluator (each sample a lane)."""
+    n = len(psi)
+    out = np.zeros(n)
+    if terms:
+        coef = np.repeat(np.array([[t.coefficient] for t in terms], dtype=float), n, axis=1)
+        ints = [np.array([getattr(t, f) for t in terms], dtype=np.int64) for f in TERM_FIELDS]
+        psi, r = np.ascontiguousarray(psi, dtype=float), np.ascontiguousarray(r, dtype=float)
+        _forcing_lanes(out, np.empty(n), psi, r, coef, *ints)
+    return out
 
 
 def substeps_for(h: float, fastest_time_constant: float, steps_per_time_constant: float = 2.0) -> int:

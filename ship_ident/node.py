@@ -41,94 +41,44 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
-from .estimators import method_names
+from .estimate_log import EstimateLog
 from .io import FLOAT64, IMU, Sample, imu_samples
 from .jsonio import dumps_json
-from .online import CONDITION_LEVELS, MAX_WINDOW_SAMPLES, ConfigError, EstimateLog, OnlineConfig, OnlineIdentifier
+from .online import CONDITION_LEVELS, OnlineIdentifier
+from .online_config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
 
 NODE_NAME = "ship_ident"
 TICKS_PER_REFIT = 5  # the schedule is checked this many times per refit period
 
-# name -> (description, (low, high) or None, read_only)
-PARAMETER_DOCS = {
-    "rudder_topic": ("std_msgs/Float64 rudder angle topic, rad (positive gives positive yaw rate)", None, True),
-    "heading_topic": ("std_msgs/Float64 heading topic, rad, NED (clockwise), may be wrapped", None, True),
-    "yaw_rate_topic": ("std_msgs/Float64 yaw rate topic, rad/s, NED (clockwise)", None, True),
-    "speed_topic": ("std_msgs/Float64 forward speed topic, m/s; empty: no speed input", None, True),
-    "imu_topic": (
-        "sensor_msgs/Imu topic (ENU) used for heading and yaw rate instead of "
-        "heading_topic and yaw_rate_topic; empty: not used",
-        None,
-        True,
-    ),
-    "sample_time": ("s, grid step the window is resampled to", (0.01, 1.0), False),
-    "window_length": ("s of data in each fit", (10.0, 3600.0), False),
-    "refit_period": ("s between refits", (0.1, 3600.0), False),
-    "model": ("base model: nomoto1 (K, T) or nomoto2 (K, T1, T2, T3)", None, False),
-    "effects": (
-        "effects added to the model: rudder_offset, cubic_yaw, rudder_delay, wind_yaw, gyro_bias, speed_dependence",
-        None,
-        False,
-    ),
-    "method": (f"estimator: {', '.join(method_names())}", None, False),
-    "min_window_length": ("s of data needed before the first fit", (1.0, 3600.0), False),
-    "min_rudder_std": ("rad; a window with less rudder activity gives no new estimate", (0.0, 0.5), False),
-    "min_fit_correlation": ("free-run yaw-rate correlation below which the fit is reported poor", (0.0, 1.0), False),
-    "stale_timeout": ("s without a sample before an input is reported stale", (0.01, 3600.0), False),
-    "gap_threshold": (
-        "s without a sample that splits the window into segments (>= sample_time); 0: five sample times",
-        (0.0, 3600.0),
-        False,
-    ),
-    "rudder_limit": (
-        "rad, the steering gear's limit: a rudder held there for half the window is reported rudder_saturated",
-        (0.01, 1.5708),
-        False,
-    ),
-    "clock_jump_threshold": ("s; a clock step back this large resets the window", (0.01, 3600.0), False),
-    "max_window_samples": (
-        "hard bound on stored samples per input (about 110 bytes each)",
-        (100, MAX_WINDOW_SAMPLES),
-        False,
-    ),
-    "prediction_horizon": ("s of free run from the measured state behind ~/predicted_yaw_rate", (0.1, 3600.0), False),
-    "change_ratio": (
-        "ratio (mean squares) of the last model's free-run yaw-rate error over the newest "
-        "change_test_length s to its usual level beyond which, on two refits in a row (or 4x it "
-        "once over the newest refit period), the vessel counts as changed and the window "
-        "restarts; 0: never",
-        (0.0, 1e6),
-        False,
-    ),
-    "change_test_length": ("s of newest data the change test runs the last model over", (1.0, 3600.0), False),
-    "qos_reliability": ("input QoS reliability: best_effort (sensor data) or reliable", None, True),
-    "qos_depth": ("input QoS history depth (messages kept per topic)", (1, 10000), True),
-    "log_directory": ("directory of the JSON-lines estimate log (estimates.jsonl, rotated); empty: no log", None, True),
-    "log_max_bytes": ("size in bytes at which the estimate log is rotated", (1000, 10**9), True),
-    "log_backups": ("rotated estimate log files kept (estimates.jsonl.1 ...)", (0, 1000), True),
+RELIABILITY = {
+    name: getattr(ReliabilityPolicy, name.upper()) for name in spec(NodeSettings, "qos_reliability").options()
 }
-NODE_DEFAULTS = {
-    "qos_reliability": "best_effort",
-    "qos_depth": 100,
-    "log_directory": "",
-    "log_max_bytes": 10_000_000,
-    "log_backups": 5,
-}
-RELIABILITY = {"best_effort": ReliabilityPolicy.BEST_EFFORT, "reliable": ReliabilityPolicy.RELIABLE}
-CONFIG_NAMES = [f.name for f in fields(OnlineConfig)]
+CONFIG_NAMES = OnlineConfig.field_names()
+SETTING_NAMES = [f.name for f in fields(NodeSettings)]
 DIAGNOSTIC_LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
 
 
-def _descriptor(name: str, value) -> ParameterDescriptor:
-    description, limits, read_only = PARAMETER_DOCS[name]
-    descriptor = ParameterDescriptor(description=description, read_only=read_only)
-    if isinstance(value, (list, tuple)):
-        descriptor.type = ParameterType.PARAMETER_STRING_ARRAY
-    if limits and isinstance(value, float):
-        descriptor.floating_point_range = [FloatingPointRange(from_value=float(limits[0]), to_value=float(limits[1]))]
-    elif limits and isinstance(value, int):
-        descriptor.integer_range = [IntegerRange(from_value=limits[0], to_value=limits[1], step=1)]
-    return descriptor
+def parameter_descriptors() -> dict:
+    """{name: (default, ParameterDescriptor)} of every node parameter, built from its one definition
+    (``online_config``): description with the unit, range, registry names, read-only."""
+    out = {}
+    for name, (default, s) in specs(*NODE_PARAMETERS).items():
+        descriptor = ParameterDescriptor(
+            description=s.description + (f" [{s.unit}]" if s.unit else ""),
+            read_only=s.read_only,
+            additional_constraints=s.range_text() if s.choices else "",
+        )
+        if isinstance(default, tuple):
+            descriptor.type = ParameterType.PARAMETER_STRING_ARRAY
+            default = list(default)
+        if s.limits and isinstance(default, float):
+            descriptor.floating_point_range = [
+                FloatingPointRange(from_value=float(s.limits[0]), to_value=float(s.limits[1]))
+            ]
+        elif s.limits and isinstance(default, int):
+            descriptor.integer_range = [IntegerRange(from_value=s.limits[0], to_value=s.limits[1], step=1)]
+        out[name] = (default, descriptor)
+    return out
 
 
 class IdentifierNode(Node):
@@ -136,23 +86,19 @@ class IdentifierNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
-        defaults = dict(OnlineConfig().to_json(), **NODE_DEFAULTS)
-        for name, value in defaults.items():
-            self.declare_parameter(name, value, _descriptor(name, value))
+        for name, (value, descriptor) in parameter_descriptors().items():
+            self.declare_parameter(name, value, descriptor)
         self.identifier = OnlineIdentifier(self._config_from_parameters())  # ConfigError on bad values
-        reliability = self.get_parameter("qos_reliability").value
-        if reliability not in RELIABILITY:
-            raise ConfigError(f"qos_reliability must be best_effort or reliable, got {reliability!r}")
+        settings = NodeSettings(**{name: self.get_parameter(name).value for name in SETTING_NAMES}).validate()
         qos = QoSProfile(
             history=HistoryPolicy.KEEP_LAST,
-            depth=self.get_parameter("qos_depth").value,
-            reliability=RELIABILITY[reliability],
+            depth=settings.qos_depth,
+            reliability=RELIABILITY[settings.qos_reliability],
         )
         self._expected_types = self._subscribe(self.identifier.config, qos)
-        directory = self.get_parameter("log_directory").value
         self.estimate_log = (
-            EstimateLog(directory, self.get_parameter("log_max_bytes").value, self.get_parameter("log_backups").value)
-            if directory
+            EstimateLog(settings.log_directory, settings.log_max_bytes, settings.log_backups)
+            if settings.log_directory
             else None
         )
         self.parameters_pub = self.create_publisher(Float64MultiArray, "~/parameters", 10)
@@ -179,14 +125,11 @@ class IdentifierNode(Node):
     def _config_from_parameters(self, overrides: dict | None = None) -> OnlineConfig:
         values = {name: self.get_parameter(name).value for name in CONFIG_NAMES}
         values.update(overrides or {})
-        values["effects"] = tuple(values["effects"] or ())
         return OnlineConfig(**values).validate()
 
     def _check_parameters(self, parameters) -> SetParametersResult:
         """Reject a change that would give an unusable configuration, saying why."""
         changes = {p.name: p.value for p in parameters if p.name in CONFIG_NAMES}
-        if "effects" in changes:
-            changes["effects"] = tuple(changes["effects"] or ())
         try:
             self._config_from_parameters(changes)
         except (ConfigError, TypeError) as exc:

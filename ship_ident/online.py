@@ -13,7 +13,8 @@ the last good one when this window could not give one), the window it came
 from, the model's predicted yaw rate at the window end, and the conditions
 found (no data, stale input, gap, too little excitation, poor fit, implausible
 units or signs, ...), each with a severity OK / WARN / ERROR and a sentence.
-``EstimateLog`` keeps the accepted estimates as rotated JSON-lines files.
+The configuration is ``online_config.OnlineConfig``, the checks of the inputs
+``input_checks``; the node's estimate log (a file writer) ``estimate_log``.
 """
 
 from __future__ import annotations
@@ -22,30 +23,28 @@ import math
 import threading
 import time as wallclock
 from collections import deque
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from itertools import chain
-from pathlib import Path
 
 import numpy as np
 
 from .change import ChangeDetector, block_errors, covering_blocks, fit_gain
 from .dataset import DataError, resample_series
-from .estimators import DEFAULT_METHOD, MethodError, make_estimator
-from .estimators.base import MIN_RUDDER_STD, Estimate, excitation_shortfall
-from .jsonio import dumps_json
+from .estimators import make_estimator
+from .estimators.base import Estimate, excitation_shortfall
+from .input_checks import (
+    REJECTIONS,
+    heading_plausibility,
+    input_conditions,
+    order_rejection,
+    rudder_saturation,
+    value_rejection,
+    window_truncation,
+)
 from .metrics import free_run_fit
-from .samples import ROLES, Sample, Topics
+from .online_config import OnlineConfig
+from .samples import ROLES, Sample
 from .structure import Structure, StructureError
-
-REQUIRED_ROLES = ("rudder", "heading", "yaw_rate")
-
-# Largest magnitude a sensor can plausibly report (SI); beyond it a sample is a fault.
-ABSURD_LIMITS = {
-    "rudder": math.radians(90.0),  # rad: no rudder turns beyond 90 deg
-    "heading": 1000.0,  # rad: wrapped or unwrapped compass heading
-    "yaw_rate": 3.0,  # rad/s (172 deg/s): no USV turns faster
-    "speed": 50.0,  # m/s
-}
 
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
@@ -72,22 +71,6 @@ CONDITION_LEVELS = {
     "estimate_log_failed": WARN,  # reported by the node
 }
 
-# A stored sample costs about 110 bytes (a tuple of two floats in a deque): one million per input,
-# four inputs, is about 0.4 GB, the most a vessel computer should give to the window.
-MAX_WINDOW_SAMPLES = 1_000_000
-
-# Plausibility of heading against yaw rate: the heading change over intervals of HEADING_BASELINE
-# is regressed on the integrated yaw rate; the slope is 1 when both are rad and NED.
-HEADING_BASELINE = 1.0  # s
-MIN_TURN_RATE_STD = math.radians(0.5)  # rad/s: with less turning the slope says nothing
-DEGREES_SLOPE = 10.0  # slope beyond this: heading in degrees (57.3)
-DEGREE_WRAP = (300.0, 420.0)  # a heading step this large is a wrap at 360 (degrees)
-# Rudder saturation: a single extreme value, within SATURATION_TOLERANCE of the steering gear's
-# limit, held (within SATURATION_TOLERANCE) for this share of the window.
-SATURATION_SHARE = 0.5
-SATURATION_TOLERANCE = math.radians(1.0)  # rad
-GAP_SAMPLES = 5  # gap_threshold 0: an input pause of this many sample times splits
-
 # Trust in a new estimate against the last good one (see OnlineIdentifier._distrust).
 JUMP_STANDARD_ERRORS = 5.0  # a jump beyond this many joint standard errors needs evidence
 CLEAR_IMPROVEMENT = 2.0  # ... its free run over the newest data this many times better
@@ -102,8 +85,6 @@ GAIN_FITS = ((("K", "T", "T1"), 4.0), (("K",), 2.0))
 MIN_GAIN_SAMPLES = 20  # new samples needed for the gain refit after a change
 SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published uncertainty
 
-REJECTIONS = ("non_finite", "absurd", "out_of_order", "duplicate")
-
 # Estimator flags that make an estimate unusable even with a good-looking fit: the closed-form
 # map gave a gain or time constant outside its physical range, the output-error search ended
 # with the gain or the main time constant on a bound (no hull has K = 100 1/s), or it stopped
@@ -117,137 +98,6 @@ POOR_FIT_FLAGS = (
     "T2_out_of_bounds",
     "oe_not_converged",
 ) + STUCK_FLAGS
-
-
-DEFAULT_TOPICS = Topics()
-
-
-class ConfigError(ValueError):
-    """An online configuration value out of range or unknown; the message says which and why."""
-
-
-@dataclass(frozen=True)
-class OnlineConfig:
-    """Everything the online identifier and the node are configured with (SI units)."""
-
-    rudder_topic: str = DEFAULT_TOPICS.rudder
-    heading_topic: str = DEFAULT_TOPICS.heading
-    yaw_rate_topic: str = DEFAULT_TOPICS.yaw_rate
-    speed_topic: str = ""  # empty: no speed input (DEFAULT_TOPICS.speed when wanted)
-    imu_topic: str = ""  # sensor_msgs/Imu (ENU) instead of heading and yaw rate
-    sample_time: float = 0.1  # s, grid the window is resampled to
-    window_length: float = 180.0  # s of data in each fit
-    refit_period: float = 5.0  # s between refits
-    model: str = "nomoto2"
-    effects: tuple = ("rudder_offset", "cubic_yaw")
-    method: str = DEFAULT_METHOD
-    min_window_length: float = 60.0  # s of data before the first fit
-    min_rudder_std: float = float(MIN_RUDDER_STD)  # rad: less rudder activity gives no new estimate
-    rudder_limit: float = math.radians(35.0)  # rad, the steering gear's limit (rudder_saturated there)
-    min_fit_correlation: float = 0.8  # free-run yaw-rate correlation below this is a poor fit
-    stale_timeout: float = 1.0  # s without a sample on an input before it is stale
-    gap_threshold: float = 0.0  # s without a sample that splits the window; 0: GAP_SAMPLES
-    # sample times
-    clock_jump_threshold: float = 1.0  # s: a stamp this far back is a clock jump (window reset);
-    # forward, a step beyond max(this, refit_period) is one
-    max_window_samples: int = 20000  # hard bound on stored samples per input
-    prediction_horizon: float = 10.0  # s of free run behind the predicted yaw rate
-    change_ratio: float = 9.0  # newest free-run error / usual level (mean squares) that
-    # restarts the window (the vessel changed); 0: never
-    change_test_length: float = 30.0  # s of newest data the change test runs the model over
-
-    def __post_init__(self):
-        effects = self.effects
-        if isinstance(effects, str):
-            effects = [e for e in effects.split(",")]
-        object.__setattr__(self, "effects", tuple(e.strip() for e in effects if e.strip()))
-
-    def validate(self) -> OnlineConfig:
-        """Raise ConfigError naming the first bad value; return self when all are usable."""
-        positive = (
-            "sample_time",
-            "window_length",
-            "refit_period",
-            "stale_timeout",
-            "clock_jump_threshold",
-            "prediction_horizon",
-            "change_test_length",
-            "rudder_limit",
-        )
-        for name in positive:
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ConfigError(f"{name} must be a finite number > 0 s, got {value!r}")
-        if self.sample_time > 1.0:
-            raise ConfigError(f"sample_time {self.sample_time} s is too coarse for yaw dynamics; use <= 1 s")
-        if not 0 < self.min_window_length <= self.window_length:
-            raise ConfigError(
-                f"min_window_length must be in (0, window_length={self.window_length}] s, got {self.min_window_length}"
-            )
-        if self.window_length < 20 * self.sample_time:
-            raise ConfigError(
-                f"window_length {self.window_length} s holds fewer than 20 samples of {self.sample_time} s"
-            )
-        if not (self.gap_threshold == 0 or self.sample_time <= self.gap_threshold < math.inf):
-            raise ConfigError(
-                f"gap_threshold must be 0 ({GAP_SAMPLES} sample times) or >= sample_time "
-                f"{self.sample_time} s, got {self.gap_threshold!r}"
-            )
-        if self.rudder_limit > math.radians(90.0):
-            raise ConfigError(f"rudder_limit must be <= 1.571 rad (90 deg), got {self.rudder_limit}")
-        if not 0 <= self.min_rudder_std < 0.5:
-            raise ConfigError(f"min_rudder_std must be in [0, 0.5) rad, got {self.min_rudder_std}")
-        if not (self.change_ratio == 0 or 1 < self.change_ratio < math.inf):
-            raise ConfigError(
-                f"change_ratio must be 0 (no change test) or a finite number > 1, got {self.change_ratio!r}"
-            )
-        if not 0 <= self.min_fit_correlation <= 1:
-            raise ConfigError(f"min_fit_correlation must be in [0, 1], got {self.min_fit_correlation}")
-        needed = int(math.ceil(self.window_length / self.sample_time))
-        if self.max_window_samples > MAX_WINDOW_SAMPLES:
-            raise ConfigError(
-                f"max_window_samples {self.max_window_samples} would take about "
-                f"{4 * 110 * self.max_window_samples / 1e9:.1f} GB for four inputs; "
-                f"use <= {MAX_WINDOW_SAMPLES}"
-            )
-        if self.max_window_samples < max(needed, 100):
-            raise ConfigError(
-                f"max_window_samples {self.max_window_samples} cannot hold a "
-                f"{self.window_length} s window at {self.sample_time} s "
-                f"(need >= {max(needed, 100)})"
-            )
-        for name in ("rudder_topic", "heading_topic", "yaw_rate_topic"):
-            if not self.imu_topic and not getattr(self, name):
-                raise ConfigError(f"{name} is empty; name the topic (or set imu_topic for heading and yaw rate)")
-        try:
-            structure = self.structure()
-            make_estimator(self.method)
-        except (StructureError, MethodError) as exc:
-            raise ConfigError(str(exc)) from None
-        if structure.needs_speed and not self.speed_topic:
-            raise ConfigError("speed_dependence needs speed_topic set")
-        return self
-
-    def structure(self) -> Structure:
-        return Structure(self.model, list(self.effects))
-
-    @property
-    def gap(self) -> float:
-        """s without a sample that splits the window: gap_threshold, or GAP_SAMPLES sample times."""
-        return self.gap_threshold or GAP_SAMPLES * self.sample_time
-
-    def changed(self, **values) -> OnlineConfig:
-        """A validated copy with some values replaced."""
-        return replace(self, **values).validate()
-
-    @classmethod
-    def field_names(cls) -> list[str]:
-        return [f.name for f in fields(cls)]
-
-    def to_json(self) -> dict:
-        out = asdict(self)
-        out["effects"] = list(self.effects)
-        return out
 
 
 @dataclass
@@ -355,19 +205,12 @@ class OnlineIdentifier:
             return outcome
 
     def _check(self, sample: Sample) -> str:
-        if sample.role not in ROLES:
-            raise ValueError(f"unknown role {sample.role!r}; use one of {', '.join(ROLES)}")
-        if not (math.isfinite(sample.time) and math.isfinite(sample.value)):
-            return "non_finite"
-        if abs(sample.value) > ABSURD_LIMITS[sample.role]:
-            return "absurd"
-        self._observe_clock(sample.time)
-        newest = self._newest[sample.role]
-        if sample.time == newest:
-            return "duplicate"
-        if sample.time < newest:
-            return "out_of_order"
-        return "accepted"
+        """``accepted`` or why not; a usable value moves the clock even when its stamp is out of order."""
+        rejection = value_rejection(sample)
+        if not rejection:
+            self._observe_clock(sample.time)
+            rejection = order_rejection(sample.time, self._newest[sample.role])
+        return rejection or "accepted"
 
     def _observe_clock(self, now: float) -> None:
         """Clock jumps restart the schedule from ``now``.
@@ -437,13 +280,13 @@ class OnlineIdentifier:
             last_good, last_window = self._last_good, self._last_good_window
             last_jump = self._last_jump
             change_note = self._change_note
-        conditions = self._input_conditions(config, series, newest, now, fresh, last_jump)
+        conditions = input_conditions(config, series, newest, now, fresh, last_jump)
         if change_note:
             conditions["vessel_changed"] = change_note
             if last_good is not None:  # the new data are being fitted (K first): not a first fit
                 conditions.pop("window_filling", None)
-        conditions.update(_truncation(config, series, full, now))
-        conditions.update(_heading_plausibility(series))
+        conditions.update(window_truncation(config, series, full, now))
+        conditions.update(heading_plausibility(series))
         record = RefitRecord(time=now, conditions=conditions, counts=counts)
         if "no_data" not in conditions and "window_filling" not in conditions:
             self._fit(config, series, last_good, record)
@@ -457,41 +300,6 @@ class OnlineIdentifier:
     def _prune(window: deque, oldest: float) -> None:
         while window and window[0][0] < oldest:
             window.popleft()
-
-    @staticmethod
-    def _input_conditions(config, series, newest, now, fresh, last_jump) -> dict:
-        conditions = {}
-        roles = [r for r in REQUIRED_ROLES] + (["speed"] if config.speed_topic else [])
-        empty = [r for r in roles if len(series[r]) < 2]
-        if empty:
-            conditions["no_data"] = f"no {', '.join(empty)} data in the last {config.window_length:g} s"
-        else:
-            span = min(series[r][-1, 0] for r in roles) - max(series[r][0, 0] for r in roles)
-            if span < config.min_window_length - 0.5 * config.sample_time:
-                conditions["window_filling"] = (
-                    f"window holds {max(span, 0):.0f} s of {config.min_window_length:g} s needed for a first fit"
-                )
-        stale = [
-            f"{r} ({now - newest[r]:.1f} s)"
-            for r in roles
-            if math.isfinite(newest[r]) and now - newest[r] > config.stale_timeout
-        ]
-        if stale:
-            conditions["stale_input"] = "no new samples on " + ", ".join(stale)
-        rejected = {k: fresh[k] for k in REJECTIONS if fresh[k]}
-        if rejected:
-            conditions["rejected_samples"] = "rejected since last refit: " + ", ".join(
-                f"{n} {k.replace('_', '-')}" for k, n in rejected.items()
-            )
-        if fresh["clock_jumps"] and last_jump < 0:
-            conditions["clock_jump"] = f"clock jumped back {-last_jump:.1f} s; window and schedule were reset"
-        elif fresh["clock_jumps"]:
-            conditions["clock_jump"] = (
-                f"clock jumped forward {last_jump:.1f} s (or every input "
-                "fell silent); schedule restarted, the window keeps only "
-                f"the last {config.window_length:g} s"
-            )
-        return conditions
 
     def _fit(self, config: OnlineConfig, series: dict, last_good, record: RefitRecord) -> None:
         roles = [r for r in ROLES if r != "speed" or config.speed_topic]
@@ -518,7 +326,7 @@ class OnlineIdentifier:
             record.conditions["gap_in_window"] = (
                 f"{len(dataset.gaps)} gap(s) in the window, longest {longest:.1f} s; fitting the segments apart"
             )
-        record.conditions.update(_rudder_saturation(dataset.rudder, config.rudder_limit))
+        record.conditions.update(rudder_saturation(dataset.rudder, config.rudder_limit))
         rudder_std = float(np.std(dataset.rudder))
         if rudder_std < config.min_rudder_std:
             record.conditions["too_little_excitation"] = (
@@ -529,13 +337,8 @@ class OnlineIdentifier:
         estimator = make_estimator(config.method)
         try:
             estimate = None
-            if (
-                hasattr(estimator, "refine")
-                and last_good is not None
-                and last_good.ok
-                and last_good.method == config.method
-            ):
-                estimate = estimator.refine(structure, dataset, last_good)  # warm start
+            if last_good is not None and last_good.ok and last_good.method == config.method:
+                estimate = estimator.fit(structure, dataset, starts=(last_good.parameters,))  # warm start
                 if any(f in STUCK_FLAGS for f in estimate.flags):
                     estimate = None  # the vessel changed beyond the warm start's reach: fit afresh
             if estimate is None:
@@ -731,98 +534,6 @@ def _as_array(window: deque) -> np.ndarray:
     return np.fromiter(chain.from_iterable(window), dtype=float, count=2 * len(window)).reshape(-1, 2)
 
 
-def _truncation(config: OnlineConfig, series: dict, full: list, now: float) -> dict:
-    """The sample bound cut an input's window short of ``window_length``."""
-    short = [
-        f"{role} ({now - series[role][0, 0]:.0f} s)"
-        for role in full
-        if len(series[role]) and series[role][0, 0] > now - config.window_length + config.sample_time
-    ]
-    if not short:
-        return {}
-    return {
-        "window_truncated": (
-            f"max_window_samples ({config.max_window_samples}) holds less than "
-            f"the {config.window_length:g} s window of {', '.join(short)}: the "
-            "input is faster than planned; raise max_window_samples or shorten "
-            "window_length"
-        )
-    }
-
-
-def _heading_plausibility(series: dict) -> dict:
-    """Heading in degrees, or heading and yaw rate of opposite sign conventions.
-
-    The heading's change over ``HEADING_BASELINE`` intervals is regressed on
-    the yaw rate integrated over the same intervals: the slope is 1 for rad
-    and NED on both, 57.3 for a heading in degrees, -1 for a yaw rate of the
-    other sign (ENU, counter-clockwise positive). Heading steps of about 360
-    (wraps in degrees) also give degrees away when the boat hardly turns.
-    """
-    heading, yaw_rate = series["heading"], series["yaw_rate"]
-    if len(heading) < 10 or len(yaw_rate) < 10:
-        return {}
-    steps = np.abs(np.diff(heading[:, 1]))
-    degree_wraps = int(np.count_nonzero((steps > DEGREE_WRAP[0]) & (steps < DEGREE_WRAP[1])))
-    t = heading[:, 0]
-    stride = max(1, int(round(HEADING_BASELINE / max(float(np.median(np.diff(t))), 1e-6))))
-    t, psi = t[::stride], np.unwrap(heading[:, 1])[::stride]
-    inside = (t >= yaw_rate[0, 0]) & (t <= yaw_rate[-1, 0])
-    t, psi = t[inside], psi[inside]
-    slope = correlation = math.nan
-    if len(t) >= 10:
-        turned = np.diff(_integral_at(yaw_rate[:, 0], yaw_rate[:, 1], t))
-        changed = np.diff(psi)
-        if np.std(turned / np.diff(t)) >= MIN_TURN_RATE_STD:
-            slope = float(np.dot(changed, turned) / np.dot(turned, turned))
-            correlation = float(np.corrcoef(changed, turned)[0, 1])
-    if abs(slope) > DEGREES_SLOPE or degree_wraps:
-        evidence = (
-            f"it changes {abs(slope):.0f}x as fast as the yaw rate turns the boat"
-            if abs(slope) > DEGREES_SLOPE
-            else f"it steps by about 360 {degree_wraps} time(s)"
-        )
-        return {
-            "heading_in_degrees": (
-                f"the heading looks like degrees, not rad ({evidence}); "
-                "publish it in rad: heading-based fit figures are wrong "
-                "until then"
-            )
-        }
-    if slope < -0.5 and correlation < -0.5:
-        return {
-            "yaw_rate_sign": (
-                f"heading and yaw rate turn opposite ways (correlation "
-                f"{correlation:.2f}): one of them is counter-clockwise positive "
-                "(ENU); negate the yaw rate (or heading) to NED, or use imu_topic "
-                "for an Imu"
-            )
-        }
-    return {}
-
-
-def _integral_at(time: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """Trapezoidal integral of ``values`` over ``time`` from its start, at the times ``at``."""
-    cumulative = np.concatenate([[0.0], np.cumsum(np.diff(time) * (values[1:] + values[:-1]) / 2)])
-    return np.interp(at, time, cumulative)
-
-
-def _rudder_saturation(rudder: np.ndarray, limit: float) -> dict:
-    """The rudder held at the steering gear's limit (rad) for most of the window: saturated (or
-    stuck there). A zigzag or a turn holding a smaller angle is not saturation."""
-    for extreme in (np.percentile(rudder, 99.5), np.percentile(rudder, 0.5)):
-        share = float(np.mean(np.abs(rudder - extreme) <= SATURATION_TOLERANCE))
-        if abs(extreme) >= limit - SATURATION_TOLERANCE and share >= SATURATION_SHARE:
-            return {
-                "rudder_saturated": (
-                    f"rudder held at {math.degrees(extreme):+.1f} deg for "
-                    f"{100 * share:.0f} % of the window (saturated or stuck): "
-                    "the fit rests on the remaining samples"
-                )
-            }
-    return {}
-
-
 def _short_test(config: OnlineConfig) -> float:
     """s of newest data of the change detector's quick test: one refit period, 3 s to a third of
     ``change_test_length``."""
@@ -889,49 +600,6 @@ class EstimateScatter:
     def honest(self, estimate) -> dict:
         factors = self.factors(estimate)
         return {name: std * factors.get(name, 1.0) for name, std in estimate.std_errors.items()}
-
-
-class EstimateLog:
-    """Accepted estimates as JSON lines in ``directory/estimates.jsonl``, rotated by size.
-
-    A line that would take the file past ``max_bytes`` first moves it to
-    ``estimates.jsonl.1`` (older files shift to ``.2`` ... up to ``backups``;
-    the oldest is deleted). Each line is written and flushed at once and the
-    file is appended to across restarts, so a trip's history survives them.
-    """
-
-    FILE_NAME = "estimates.jsonl"
-
-    def __init__(self, directory, max_bytes: int = 10_000_000, backups: int = 5):
-        if max_bytes < 1000 or backups < 0:
-            raise ConfigError(f"log_max_bytes must be >= 1000 and log_backups >= 0, got {max_bytes} and {backups}")
-        self.path = Path(directory) / self.FILE_NAME
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            with self.path.open("ab"):
-                pass
-        except OSError as exc:
-            raise ConfigError(
-                f"cannot write the estimate log {self.path}: {exc.strerror or exc}; choose another log_directory"
-            ) from None
-        self.max_bytes, self.backups = max_bytes, backups
-
-    def write(self, record: dict) -> None:
-        """Append one record (strict JSON, NaN as null); raises OSError when the disk refuses."""
-        line = (dumps_json(record) + "\n").encode()
-        size = self.path.stat().st_size if self.path.exists() else 0
-        if size and size + len(line) > self.max_bytes:
-            self._rotate()
-        with self.path.open("ab") as f:
-            f.write(line)
-
-    def _rotate(self) -> None:
-        name = self.path.name
-        for k in range(self.backups, 0, -1):
-            older = self.path if k == 1 else self.path.with_name(f"{name}.{k - 1}")
-            if older.exists():
-                older.replace(self.path.with_name(f"{name}.{k}"))
-        self.path.unlink(missing_ok=True)
 
 
 def run_schedule(identifier: OnlineIdentifier, samples):

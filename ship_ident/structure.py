@@ -22,7 +22,7 @@ import numpy as np
 
 from .dataset import DataError, Dataset
 from .effects import EFFECTS, Effect, Parameter
-from .integrate import simulate_kernel, substeps_for
+from .integrate import TERM_FIELDS, simulate_kernel, substeps_for
 
 BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
     "nomoto1": (
@@ -59,16 +59,7 @@ class Structure:
     def __init__(self, model: str = "nomoto2", effects=()):
         if model not in BASE_MODELS:
             raise StructureError(f"unknown model {model!r}; choose from {', '.join(BASE_MODELS)}")
-        effects = (
-            [e.strip() for e in effects if e.strip()]
-            if not isinstance(effects, str)
-            else [e.strip() for e in effects.split(",") if e.strip()]
-        )
-        unknown = [e for e in effects if e not in EFFECTS]
-        if unknown:
-            raise StructureError(f"unknown effect {unknown[0]!r}; choose from {', '.join(EFFECTS)}")
-        if len(set(effects)) != len(effects):
-            raise StructureError(f"effect listed twice: {effects}")
+        effects = parse_effects(effects)
         self.model = model
         self.effect_names = tuple(effects)
         self.effects: tuple[Effect, ...] = tuple(EFFECTS[e] for e in effects)
@@ -89,6 +80,15 @@ class Structure:
 
     def with_effects(self, effects) -> Structure:
         return Structure(self.model, list(effects))
+
+    def neutral_effect_start(self, base: dict) -> dict:
+        """A start for this structure from ``base``, the parameters of the model without some of
+        its effects: the missing effects' parameters at their neutral values, where they do
+        nothing, so the start simulates exactly as the model it came from."""
+        start = dict(base)
+        for effect in self.effects:
+            start.update({k: v for k, v in effect.neutral().items() if k not in base})
+        return start
 
     def label(self) -> str:
         return "+".join((self.model,) + self.effect_names)
@@ -148,10 +148,7 @@ class Structure:
         rudder, gain, tscale = (np.array([x[i] for x in inputs], dtype=float) for i in range(3))
         terms = [[t for e in self.effects for t in e.forcing_terms(p)] for p in param_sets]
         coef = np.array([[t.coefficient for t in ts] for ts in terms], dtype=float).reshape(len(terms), -1)
-        ints = [
-            np.array([getattr(t, f) for t in terms[0]], dtype=np.int64)
-            for f in ("r_power", "abs_power", "harmonic", "trig")
-        ]
+        ints = [np.array([getattr(t, f) for t in terms[0]], dtype=np.int64) for f in TERM_FIELDS]
         constants = np.array(
             [
                 [p["K"], p["T"], 0.0, 0.0] if self.order == 1 else [p["K"], p["T1"], p["T2"], p["T3"]]
@@ -258,9 +255,17 @@ class Structure:
         return out
 
 
-def parse_effects(text: str | None) -> list[str]:
-    """Effect names from a comma-separated string ("" or None: no effects)."""
-    return [e.strip() for e in (text or "").split(",") if e.strip()]
+def parse_effects(effects) -> tuple[str, ...]:
+    """Effect names from a comma-separated string or a sequence of names ("", None or (): no
+    effects); StructureError for a name not in ``effects.EFFECTS`` (naming those) or one listed twice."""
+    items = (effects or "").split(",") if isinstance(effects, str) or effects is None else effects
+    names = tuple(str(e).strip() for e in items if str(e).strip())
+    unknown = [e for e in names if e not in EFFECTS]
+    if unknown:
+        raise StructureError(f"unknown effect {unknown[0]!r}; choose from {', '.join(EFFECTS)}")
+    if len(set(names)) != len(names):
+        raise StructureError(f"effect listed twice: {', '.join(names)}")
+    return names
 
 
 def require_samples(dataset: Dataset, minimum: int = 20) -> None:

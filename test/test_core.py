@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from ship_ident.dataset import DataError, Dataset, resample_series
+from ship_ident.dataset import DataError, Dataset, cut_segments, resample_series
 from ship_ident.simulator import simulate
 from ship_ident.structure import Structure, StructureError
 
@@ -136,3 +136,11 @@ def test_parameter_change_midway_keeps_motion_continuous():
     settled = slice(i + 200, None)
     assert np.max(np.abs(r[settled] - new.true_yaw_rate[settled])) < 1e-4  # rad/s
     assert np.max(np.abs(r[settled] - held.true_yaw_rate[settled])) > 0.01  # rad/s: the gain fell 30 %
+
+
+def test_segments_are_cut_into_near_equal_or_whole_pieces_that_never_cross_a_gap():
+    segments = ((0, 100), (120, 125))
+    assert cut_segments(segments, 30) == ((0, 33), (33, 67), (67, 100), (120, 125))
+    assert cut_segments(segments, 30, min_samples=6) == ((0, 33), (33, 67), (67, 100))
+    assert cut_segments(segments, 30, whole=True) == ((0, 30), (30, 60), (60, 90))
+    assert cut_segments(segments, 30, whole=True, offset=15) == ((15, 45), (45, 75))

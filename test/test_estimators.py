@@ -5,8 +5,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ship_ident.estimators import make_estimator, method_names
-from ship_ident.estimators.lssvm import lssvm_dual_bias_free, lssvm_dual_with_bias, lssvm_primal_with_bias, ridge_primal
+from ship_ident.estimators import OutputError, make_estimator, method_names
+from ship_ident.estimators.lssvm import (
+    OLS,
+    lssvm_dual_bias_free,
+    lssvm_dual_with_bias,
+    lssvm_primal_with_bias,
+    ridge_primal,
+)
 from ship_ident.simulator import simulate
 from ship_ident.structure import Structure
 
@@ -141,3 +147,34 @@ def test_straight_course_is_flagged_low_excitation():
 def test_method_names_all_build():
     for name in method_names():
         assert make_estimator(name).name == name
+
+
+def test_refinement_searches_from_given_starts_and_a_regression_ignores_them(noisy):
+    """One Levenberg-Marquardt step: from the truth (a given start) it ends closer to the data and
+    to T2, T3 than from the least-squares start alone (biased by the yaw-rate noise). A
+    regression has no search: starts change nothing."""
+    truth = {n: noisy.truth[n] for n in noisy.structure.parameter_names}
+    cold = OutputError(OLS(), max_iterations=1).fit(noisy.structure, noisy.dataset)
+    warm = OutputError(OLS(), max_iterations=1).fit(noisy.structure, noisy.dataset, starts=(truth,))
+    assert warm.info["cost_ratio"] < 0.97 * cold.info["cost_ratio"]
+    assert rel(warm, truth, "T2") < 0.5 * rel(cold, truth, "T2")
+    assert rel(warm, truth, "T3") < 0.5 * rel(cold, truth, "T3")
+    plain = make_estimator("rlssvm")
+    far = dict(truth, K=10 * truth["K"])
+    assert plain.fit(noisy.structure, noisy.dataset, starts=(far,)).parameters == (
+        plain.fit(noisy.structure, noisy.dataset).parameters
+    )
+
+
+def test_neutral_effect_start_simulates_as_the_model_without_the_effects(clean):
+    bare = Structure("nomoto2", ())
+    base = {n: clean.truth[n] for n in bare.parameter_names}
+    full = Structure("nomoto2", ["rudder_offset", "cubic_yaw", "wind_yaw", "rudder_delay"])
+    psi_bare, r_bare = bare.simulate(base, clean.dataset)
+    psi, r = full.simulate(full.neutral_effect_start(base), clean.dataset)
+    assert np.max(np.abs(psi - psi_bare)) < 1e-12 and np.max(np.abs(r - r_bare)) < 1e-12
+
+
+def test_rwlssvm_needs_the_sample_time_of_the_rows(noisy):
+    with pytest.raises(ValueError, match="sample time"):
+        make_estimator("rwlssvm").solve(np.eye(3), np.ones(3))

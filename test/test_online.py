@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from ship_ident.change import variance_change_point
+from ship_ident.estimate_log import EstimateLog
 from ship_ident.io import Sample
-from ship_ident.online import ConfigError, EstimateLog, OnlineConfig, OnlineIdentifier, run_schedule
+from ship_ident.online import OnlineIdentifier, run_schedule
+from ship_ident.online_config import ConfigError, OnlineConfig
 from ship_ident.simulator import Noise, random_vessel, simulate
 
 
@@ -475,6 +477,26 @@ def test_a_well_determined_window_is_used_whatever_its_yaw_rate_spread():
     assert all(abs(r.estimate["parameters"]["K"] / sim.truth["K"] - 1) < 0.1 for r in new)
     still = simulate("zigzag10", duration=200.0, seed=2, amplitude=np.radians(0.2))
     assert "the rudder hardly moves" in excitation_shortfall(still.dataset)
+
+
+def test_the_boat_hardly_turns_is_said_only_when_heading_and_yaw_rate_are_noise():
+    """A slow ship's yaw rate (spread below twice its noise) with a heading that swings by degrees
+    passes the floor; the same rudder with a heading and yaw rate that are only sensor noise is
+    refused, and the sentence says the boat hardly turns."""
+    from ship_ident.estimators.base import excitation, excitation_shortfall
+
+    data = simulate("zigzag10", duration=600.0, seed=4).dataset
+    rng = np.random.default_rng(4)
+    slow = replace(data, yaw_rate=0.05 * data.yaw_rate + rng.normal(0.0, np.radians(0.2), data.time.size))
+    ex = excitation(slow)
+    assert ex["yaw_rate_std"] < ex["yaw_rate_std_needed"] < ex["heading_std"]
+    assert excitation_shortfall(slow) is None
+    noise_only = replace(
+        data,
+        yaw_rate=rng.normal(0.0, np.radians(0.2), data.time.size),
+        heading=rng.normal(0.0, np.radians(0.1), data.time.size),
+    )
+    assert "the boat hardly turns" in excitation_shortfall(noise_only)
 
 
 @pytest.mark.slow

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from ship_ident.io import ROLES, Sample
 from ship_ident.jsonio import dumps_json
-from ship_ident.online import OnlineConfig, OnlineIdentifier, RefitRecord, run_schedule
+from ship_ident.online import OnlineIdentifier, RefitRecord, run_schedule
+from ship_ident.online_config import OnlineConfig
 from ship_ident.simulator import simulate
 
 SMALL = OnlineConfig(

@@ -13,7 +13,7 @@ from rosbags.highlevel import AnyReader
 from ship_ident.commands.replay import replay_bag
 from ship_ident.demo import BAG as DEMO_BAG
 from ship_ident.io import Topics, typestore, write_simulation
-from ship_ident.online import OnlineConfig
+from ship_ident.online_config import OnlineConfig
 from ship_ident.simulator import simulate
 
 

@@ -14,7 +14,8 @@ import numpy as np
 
 from ..estimators import DEFAULT_METHOD, make_estimator
 from ..io import write_simulation
-from ..online import OnlineConfig, OnlineIdentifier, run_schedule
+from ..online import OnlineIdentifier, run_schedule
+from ..online_config import OnlineConfig
 from ..samples import Sample, Topics
 from ..simulator import Noise, simulate
 from . import progress

@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import Dataset
-from ..online import OnlineConfig, OnlineIdentifier, run_schedule
+from ..online import OnlineIdentifier, run_schedule
+from ..online_config import OnlineConfig
 from ..simulator import Noise, random_vessel, simulate
 from . import progress, register
 from .common import table

@@ -6,9 +6,10 @@ import argparse
 import sys
 
 from ..dataset import Dataset, join_recordings
+from ..effects import EFFECTS
 from ..estimators import DEFAULT_METHOD, method_names
 from ..io import Topics, is_canonical, load_dataset, parse_columns
-from ..structure import Structure, parse_effects
+from ..structure import BASE_MODELS, Structure
 
 DEFAULT_TOPICS = Topics()
 
@@ -97,14 +98,14 @@ def add_model_args(parser: argparse.ArgumentParser, method: bool = True, threedo
     parser.add_argument(
         "--model",
         default="nomoto2",
-        choices=("nomoto1", "nomoto2") + (("3dof",) if threedof else ()),
+        choices=tuple(BASE_MODELS) + (("3dof",) if threedof else ()),
         help="base model (default %(default)s)" + ("; 3dof: seed 000's surge-sway-yaw model" if threedof else ""),
     )
     parser.add_argument(
         "--effects",
         default="",
         metavar="A,B",
-        help="comma-separated effects, e.g. rudder_offset,cubic_yaw (default: none)",
+        help=f"comma-separated effects, any of {', '.join(EFFECTS)} (default: none)",
     )
     if method:
         parser.add_argument(
@@ -117,7 +118,7 @@ def add_model_args(parser: argparse.ArgumentParser, method: bool = True, threedo
 
 
 def structure_from_args(args: argparse.Namespace) -> Structure:
-    return Structure(args.model, parse_effects(args.effects))
+    return Structure(args.model, args.effects)
 
 
 def add_json_arg(parser: argparse.ArgumentParser) -> None:

@@ -62,7 +62,7 @@ def data_field(paths) -> str | list[str]:
 
 
 def require_excitation(dataset) -> None:
-    """Refuse data where the rudder or the yaw rate hardly moves: no model can be identified."""
+    """Refuse data where the rudder hardly moves or the boat hardly turns: no model can be identified."""
     shortfall = excitation_shortfall(dataset)
     if shortfall:
         raise CommandError(f"{shortfall}; record a manoeuvre such as a zigzag or turns")

@@ -23,7 +23,7 @@ from ..errors import CommandError
 from ..fleet import FleetError, add_fleet_arguments, run_fleet
 from ..io import Topics
 from ..jsonio import dumps_json
-from ..online import OnlineConfig
+from ..online_config import OnlineConfig, spec
 from .common import add_data_args, add_model_args, topics_from_args
 
 DEFAULTS = OnlineConfig()
@@ -45,56 +45,31 @@ def add_parser(subparsers) -> None:
     add_data_args(parser)
     add_model_args(parser)
     parser.set_defaults(effects=",".join(DEFAULTS.effects), method=DEFAULTS.method)
-    parser.add_argument(
-        "--window-length",
-        type=float,
-        default=DEFAULTS.window_length,
-        metavar="S",
-        help="s of data in each fit (default %(default)s)",
-    )
-    parser.add_argument(
-        "--refit-period",
-        type=float,
-        default=DEFAULTS.refit_period,
-        metavar="S",
-        help="s of bag time between refits (default %(default)s)",
-    )
-    parser.add_argument(
-        "--min-window-length",
-        type=float,
-        default=DEFAULTS.min_window_length,
-        metavar="S",
-        help="s of data before the first fit (default %(default)s)",
-    )
-    parser.add_argument(
-        "--gap-threshold",
-        type=float,
-        default=DEFAULTS.gap_threshold,
-        metavar="S",
-        help="s without a sample that splits the window; 0: five sample times (default %(default)s)",
-    )
-    parser.add_argument(
-        "--rudder-limit",
-        type=float,
-        default=math.degrees(DEFAULTS.rudder_limit),
-        metavar="DEG",
-        help="the steering gear's limit in deg: a rudder held there is rudder_saturated (default %(default).0f)",
-    )
-    parser.add_argument(
-        "--change-ratio",
-        type=float,
-        default=DEFAULTS.change_ratio,
-        metavar="R",
-        help="restart the window where the vessel changed, when the newest 30 s are "
-        "mispredicted R times worse (mean squares) than usual; 0: never "
-        "(default %(default)s)",
-    )
+    for name in ("window_length", "refit_period", "min_window_length", "gap_threshold", "change_ratio"):
+        add_config_option(parser, name)
+    add_config_option(parser, "rudder_limit", degrees=True)
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object per refit on stdout, one per line (JSON lines)"
     )
     parser.add_argument("--out", metavar="OUT.mcap", help="write an MCAP with the input topics and the estimates")
     add_fleet_arguments(parser)
     parser.set_defaults(func=run)
+
+
+def add_config_option(parser, name: str, degrees: bool = False) -> None:
+    """``--NAME`` for the OnlineConfig field ``name``: its default, unit, range and description
+    from the one definition (``online_config``); ``degrees``: an angle given in deg."""
+    s = spec(OnlineConfig, name)
+    scale = math.degrees(1.0) if degrees else 1.0
+    unit = "deg" if degrees else s.unit
+    low, high = (scale * limit for limit in s.limits)
+    parser.add_argument(
+        "--" + name.replace("_", "-"),
+        type=float,
+        default=scale * getattr(DEFAULTS, name),
+        metavar="DEG" if degrees else (unit.upper() or "X"),
+        help=f"{s.description}; {low:.4g} to {high:.4g}{' ' + unit if unit else ''} (default %(default).6g)",
+    )
 
 
 def config_from_args(args, topics: Topics, has_speed: bool) -> OnlineConfig:

@@ -24,6 +24,11 @@ def method_names() -> list[str]:
     return [n for base in ESTIMATORS for n in (base, *(f"{base}+{r}" for r in REFINEMENTS))]
 
 
+def regression_method(method: str) -> str:
+    """The regression that starts ``method``: ``rlssvm`` of ``rlssvm+oe`` (a regression: itself)."""
+    return method.partition("+")[0]
+
+
 def make_estimator(method: str = DEFAULT_METHOD, **options) -> Estimator:
     """Build an estimator from ``NAME``, ``NAME+oe`` or ``NAME+pem``; options go to the base estimator."""
     base, _, refine = method.partition("+")
@@ -45,6 +50,7 @@ __all__ = [
     "MethodError",
     "make_estimator",
     "method_names",
+    "regression_method",
     "OutputError",
     "PredictionError",
 ]

@@ -1,8 +1,12 @@
 """The estimator interface and the Estimate it returns.
 
 Every estimator is an object with plain constructor parameters and one
-method, ``fit(structure, dataset) -> Estimate``. Regression estimators only
-implement ``solve(X, y)``; the shared ``RegressionEstimator.fit`` builds the
+method, ``fit(structure, dataset, starts=()) -> Estimate``; ``starts`` are
+parameter sets (dicts) an iterative refinement also searches from (the last
+window's estimate, the model without an effect with that effect at its
+neutral values: ``Structure.neutral_effect_start``), and ``uses_starts`` says
+whether an estimator reads them. Regression estimators only implement
+``solve(X, y, sample_time)``; the shared ``RegressionEstimator.fit`` builds the
 regression, maps coefficients to physical parameters, propagates the
 coefficient covariance to standard errors (delta method, inflated for
 residual autocorrelation), judges excitation and runs the model free on the
@@ -19,7 +23,7 @@ import numpy as np
 from ..dataset import DataError, Dataset
 from ..integrate import substeps_for
 from ..metrics import effective_sample_fraction, free_run_fit
-from ..signals import Signals, compute_signals, noise_level
+from ..signals import SENSOR_RESOLUTION, Signals, compute_signals, noise_level
 from ..structure import Regression, Structure
 
 MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite the hull
@@ -75,12 +79,14 @@ class Estimate:
 
 
 def excitation(dataset: Dataset) -> dict:
-    """Rudder and yaw-rate activity of a dataset (rad, rad/s), and the yaw-rate activity below which
-    the yaw rate hardly moves: twice its sensor noise (the spread is then mostly noise)."""
+    """Rudder, yaw-rate and heading activity of a dataset (rad, rad/s, rad), and the activity below
+    which each hardly moves: twice its sensor noise (the spread is then mostly noise)."""
     return {
         "rudder_std": float(np.std(dataset.rudder)),
         "yaw_rate_std": float(np.std(dataset.yaw_rate)),
         "yaw_rate_std_needed": max(HARDLY_MOVES_SNR * noise_level(dataset.yaw_rate, 0.0), MIN_YAW_RATE_STD),
+        "heading_std": float(np.std(dataset.heading)),
+        "heading_std_needed": HARDLY_MOVES_SNR * noise_level(dataset.heading, SENSOR_RESOLUTION),
     }
 
 
@@ -89,17 +95,21 @@ def excitation_shortfall(
 ) -> str | None:
     """Why the data cannot support an estimate (a sentence with the figures), or None.
 
-    Without an estimate only the floors apply: a rudder that hardly moves, a yaw rate whose spread
-    is mostly its noise. With an estimate's parameters and standard errors, the data are judged by
-    what they determine: the gain and the main time constant within MAX_RELATIVE_ERRORS of their
-    values, whatever the yaw-rate spread."""
+    Without an estimate only the floors apply: a rudder that hardly moves, a boat that hardly turns
+    (yaw-rate and heading spreads both mostly noise; a slow ship's yaw rate may be buried in its
+    noise while its heading, the integral, still determines the model). With an estimate's
+    parameters and standard errors, the data are judged by what they determine: the gain and the
+    main time constant within MAX_RELATIVE_ERRORS of their values, whatever the yaw-rate spread."""
     ex = excitation(dataset)
-    if ex["rudder_std"] < MIN_RUDDER_STD or ex["yaw_rate_std"] < ex["yaw_rate_std_needed"]:
-        moves = "the rudder hardly moves" if ex["rudder_std"] < MIN_RUDDER_STD else "the yaw rate hardly moves"
+    still = ex["yaw_rate_std"] < ex["yaw_rate_std_needed"] and ex["heading_std"] < ex["heading_std_needed"]
+    if ex["rudder_std"] < MIN_RUDDER_STD or still:
+        moves = "the rudder hardly moves" if ex["rudder_std"] < MIN_RUDDER_STD else "the boat hardly turns"
         return (
             f"too little excitation ({moves}): rudder std {np.degrees(ex['rudder_std']):.2f} deg "
             f"(need {np.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
-            f"deg/s (need {np.degrees(ex['yaw_rate_std_needed']):.3f}, twice its noise)"
+            f"deg/s and heading std {np.degrees(ex['heading_std']):.2f} deg (need "
+            f"{np.degrees(ex['yaw_rate_std_needed']):.3f} or {np.degrees(ex['heading_std_needed']):.2f}, "
+            "twice their noise)"
         )
     if parameters is None or std_errors is None:
         return None
@@ -154,11 +164,13 @@ def finish_estimate(
 
 
 class Estimator:
-    """Base class: fit a Structure to a Dataset."""
+    """Base class: fit a Structure to a Dataset, optionally also searching from given starts."""
 
     name = ""
+    uses_starts = False  # True for iterative estimators, which search from the given starts
 
-    def fit(self, structure: Structure, dataset: Dataset) -> Estimate:
+    def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
+        """Fit ``structure`` to ``dataset``; ``starts`` are parameter dicts to search from."""
         raise NotImplementedError
 
 
@@ -168,7 +180,9 @@ class RegressionEstimator(Estimator):
     def __init__(self, differentiation: str = "savgol"):
         self.differentiation = differentiation
 
-    def solve(self, X: np.ndarray, y: np.ndarray) -> Solution:
+    def solve(self, X: np.ndarray, y: np.ndarray, sample_time: float | None = None) -> Solution:
+        """Coefficients w of ``y = X w``; ``sample_time`` (s) between rows, for solvers that hold
+        out blocks of time."""
         raise NotImplementedError
 
     def regression(self, structure: Structure, dataset: Dataset) -> Regression:
@@ -182,9 +196,10 @@ class RegressionEstimator(Estimator):
             )
         return regression
 
-    def fit(self, structure: Structure, dataset: Dataset) -> Estimate:
+    def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
+        """The regression's closed-form fit: it has no search, so it ignores ``starts``."""
         regression = self.regression(structure, dataset)
-        solution = self.solve(regression.X, regression.y)
+        solution = self.solve(regression.X, regression.y, dataset.sample_time)
         params, flags = structure.parameters_from_coefficients(solution.w, regression)
         residual = solution.residual if solution.residual is not None else regression.y - regression.X @ solution.w
         dof = max(len(residual) - len(solution.w), 1)
@@ -192,16 +207,17 @@ class RegressionEstimator(Estimator):
         std = coefficient_std_errors(structure, regression, solution.w, sigma2 * solution.cov)
         info = dict(
             solution.info,
-            condition_number=float(np.linalg.cond(_scaled(regression.X))),
+            condition_number=float(np.linalg.cond(regression.X / column_scales(regression.X))),
             residual_std=float(np.sqrt(sigma2)),
             columns=regression.columns,
         )
         return finish_estimate(structure, dataset, self.name, structure.clip_to_bounds(params), std, flags, info)
 
 
-def _scaled(X: np.ndarray) -> np.ndarray:
+def column_scales(X: np.ndarray) -> np.ndarray:
+    """RMS of each column of X (1 for an all-zero column): X / column_scales(X) has unit-RMS columns."""
     scale = np.sqrt(np.mean(X**2, axis=0))
-    return X / np.where(scale > 0, scale, 1.0)
+    return np.where(scale > 0, scale, 1.0)
 
 
 def coefficient_std_errors(structure: Structure, regression: Regression, w: np.ndarray, cov_w: np.ndarray) -> dict:

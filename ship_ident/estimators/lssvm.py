@@ -27,14 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import RegressionEstimator, Solution
+from .base import RegressionEstimator, Solution, column_scales
 
 DUAL_MAX_SAMPLES = 1500  # the N x N dual (O(N^3)) is solved up to this size; beyond, its exact primal twin
-
-
-def column_scales(X: np.ndarray) -> np.ndarray:
-    scale = np.sqrt(np.mean(X**2, axis=0))
-    return np.where(scale > 0, scale, 1.0)
 
 
 def ridge_primal(X: np.ndarray, y: np.ndarray, gamma: float, weights: np.ndarray | None = None):
@@ -84,7 +79,7 @@ class OLS(RegressionEstimator):
 
     name = "ols"
 
-    def solve(self, X, y):
+    def solve(self, X, y, sample_time=None):
         w, *_ = np.linalg.lstsq(X, y, rcond=None)
         return Solution(w=w, cov=np.linalg.pinv(X.T @ X))
 
@@ -98,7 +93,7 @@ class LSSVM(RegressionEstimator):
         super().__init__(differentiation)
         self.gamma = gamma
 
-    def solve(self, X, y):
+    def solve(self, X, y, sample_time=None):
         if len(y) <= DUAL_MAX_SAMPLES:
             w, b, alpha = lssvm_dual_with_bias(X, y, self.gamma)
             solver = "dual"
@@ -121,6 +116,6 @@ class RLSSVM(RegressionEstimator):
         super().__init__(differentiation)
         self.gamma = gamma
 
-    def solve(self, X, y):
+    def solve(self, X, y, sample_time=None):
         w, cov = ridge_primal(X, y, self.gamma)
         return Solution(w=w, cov=cov, info={"gamma": self.gamma, "solver": "primal"})

@@ -51,7 +51,7 @@ import numpy as np
 from scipy import sparse
 from scipy.signal import convolve
 
-from ..dataset import Dataset
+from ..dataset import Dataset, cut_segments
 from ..signals import SENSOR_RESOLUTION, noise_level, robust_std
 from ..structure import Structure
 from .base import Estimate, Estimator, finish_estimate, fit_substeps
@@ -70,13 +70,7 @@ SPARSE_INTERVALS = 12  # beyond this many intervals the Jacobian is stored spars
 def shooting_intervals(segments, samples_per_interval: int) -> tuple[tuple[int, int], ...]:
     """Cut each segment [a, b) into near-equal intervals of about ``samples_per_interval``."""
     total = sum(b - a for a, b in segments)
-    per = max(samples_per_interval, MIN_INTERVAL_SAMPLES, int(np.ceil(total / MAX_INTERVALS)))
-    out = []
-    for a, b in segments:
-        pieces = max(1, int(round((b - a) / per)))
-        edges = np.linspace(a, b, pieces + 1).round().astype(int)
-        out.extend((int(lo), int(hi)) for lo, hi in zip(edges[:-1], edges[1:]) if hi > lo)
-    return tuple(out)
+    return cut_segments(segments, max(samples_per_interval, MIN_INTERVAL_SAMPLES, int(np.ceil(total / MAX_INTERVALS))))
 
 
 @dataclass
@@ -188,23 +182,27 @@ def huber_weights(start_residual: np.ndarray, n_samples: int) -> np.ndarray:
 class OutputError(Estimator):
     """Refine a starting estimator's result by minimising the free-run error."""
 
+    uses_starts = True
+
     def __init__(self, start: Estimator, max_iterations: int = 30, shooting_s: float = 30.0):
         self.start = start
         self.max_iterations = max_iterations
         self.shooting_s = shooting_s
         self.name = f"{start.name}+oe"
 
-    def fit(self, structure: Structure, dataset: Dataset) -> Estimate:
-        """Refine the start's fit; with effects, the start's fit of the bare model (effects
-        neutral) is a further starting point: an effect's regression column can make the
-        regression start course-unstable (KVLCC2 with cubic_yaw: T < 0)."""
+    def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
+        """Minimise the free-run error from the start's regression fit, its conservative variant
+        and each of ``starts`` (parameter dicts, e.g. the last window's estimate or the model
+        without its last effect; parameters a start lacks are the regression fit's), going on from
+        whichever simulates closest to the data. Without ``starts``, a model with effects also
+        starts from the regression fit of the bare model with the effects at their neutral values
+        (an effect's regression column can make the regression start course-unstable: KVLCC2 with
+        cubic_yaw, T < 0); given starts take its place (they come from such models already)."""
         first = self.start.fit(structure, dataset)
-        if not structure.effects:
-            return self.refine(structure, dataset, first)
-        bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
-        for effect in structure.effects:
-            bare.update(effect.neutral())
-        return self.refine(structure, dataset, first, starts=(bare,))
+        if not starts and structure.effects:
+            bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
+            starts = (structure.neutral_effect_start(bare),)
+        return self._refine(structure, dataset, first, tuple(starts))
 
     def intervals(self, dataset: Dataset) -> tuple:
         """Shooting intervals: each restarts the free run from its own estimated state."""
@@ -264,10 +262,9 @@ class OutputError(Estimator):
             out.append(valley)
         return out
 
-    def refine(self, structure: Structure, dataset: Dataset, first: Estimate, starts=()) -> Estimate:
-        """Minimise the free-run error from ``first`` (and its conservative variant) or from any of
-        ``starts`` (further parameter sets, e.g. the fit of the model without its last effect),
-        whichever simulates closest to the data."""
+    def _refine(self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple) -> Estimate:
+        """Minimise the free-run error from ``first`` (the regression fit, and its conservative
+        variant) or from any of ``starts``, whichever simulates closest to the data."""
         names = structure.free_names
         p = len(names)
         lower, upper = structure.bounds(names, dataset)

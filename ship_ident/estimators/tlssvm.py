@@ -18,8 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import RegressionEstimator, Solution
-from .lssvm import column_scales
+from .base import RegressionEstimator, Solution, column_scales
 
 TRUNCATION_RULES = ("gcv", "lcurve", "picard")
 
@@ -61,7 +60,7 @@ class TLSSVM(RegressionEstimator):
             raise ValueError(f"unknown truncation rule {rule!r}; choose from {', '.join(TRUNCATION_RULES)}")
         self.rule = rule
 
-    def solve(self, X, y):
+    def solve(self, X, y, sample_time=None):
         scale = column_scales(X)
         U, s, Vt = np.linalg.svd(X / scale, full_matrices=False)
         beta = U.T @ y

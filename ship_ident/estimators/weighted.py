@@ -24,8 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..signals import robust_std
-from .base import RegressionEstimator, Solution
-from .lssvm import column_scales, ridge_primal
+from .base import RegressionEstimator, Solution, column_scales
+from .lssvm import ridge_primal
 
 CHUNK_ROWS = 4096  # rows of the regression per batched product (the swarm's weights stay in cache)
 BOUNDS = np.array(
@@ -146,14 +146,12 @@ class RWLSSVM(RegressionEstimator):
     ):
         super().__init__(differentiation)
         self.particles, self.iterations, self.seed, self.block_s = particles, iterations, seed, block_s
-        self._sample_time = 0.1
 
-    def regression(self, structure, dataset):
-        self._sample_time = dataset.sample_time
-        return super().regression(structure, dataset)
-
-    def solve(self, X, y):
-        held_out = held_out_blocks(len(y), int(round(self.block_s / self._sample_time)))
+    def solve(self, X, y, sample_time=None):
+        """``sample_time`` (s) between rows sets the held-out blocks of ``block_s``; required."""
+        if sample_time is None:
+            raise ValueError("rwlssvm holds out blocks of time: solve needs the sample time of the rows")
+        held_out = held_out_blocks(len(y), int(round(self.block_s / sample_time)))
         objective = SwarmObjective(X, y, held_out)
         best, best_f, trace = adaptive_pso(objective, BOUNDS, self.particles, self.iterations, self.seed)
         c1, c2, gamma = best[0], best[0] + best[1], 10.0 ** best[2]

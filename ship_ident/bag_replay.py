@@ -4,7 +4,10 @@ The bag's (or CSV file's) samples go in time order through the same
 ``OnlineIdentifier`` as the node, with the node's refit schedule, as fast as
 the machine allows. ``replay_bag`` optionally writes an MCAP as it goes: the
 input topics and the node's outputs ``/ship_ident/estimate`` (the JSON
-record) and ``/ship_ident/parameters`` at the refit times, complete even
+record) and ``/ship_ident/parameters`` at the refit times, and with
+``diagnosis_period`` set ``/ship_ident/diagnosis`` (JSON) and
+``/ship_ident/held_out_error`` (rad/s) at the refits where a diagnosis
+finished (``online_diagnosis``, run inline: reproducible), complete even
 when a ``stop`` event ends the replay early. One bag per call, so many-bag
 replay (``fleet``) runs it per task. Bad input raises ``DataError`` or
 ``ConfigError`` (one line).
@@ -24,9 +27,12 @@ from .io import FLOAT64, BagWriter, Sample, Topics, read_samples, typestore
 from .jsonio import dumps_json
 from .online import OnlineIdentifier, RefitRecord, run_schedule
 from .online_config import OnlineConfig
+from .online_diagnosis import OnlineDiagnosis
 
 ESTIMATE_TOPIC = "/ship_ident/estimate"
 PARAMETERS_TOPIC = "/ship_ident/parameters"
+DIAGNOSIS_TOPIC = "/ship_ident/diagnosis"
+HELD_OUT_ERROR_TOPIC = "/ship_ident/held_out_error"
 
 
 class Progress:
@@ -89,7 +95,7 @@ def replay_bag(
     records, fed = [], []
     wall0 = time.perf_counter()
     with ReplayWriter(out, topics) if out else _NoWriter() as writer:
-        for record in run_schedule(identifier, _feed(samples, writer, stop, fed)):
+        for record in run_schedule(identifier, _feed(samples, writer, stop, fed), OnlineDiagnosis()):
             writer.write_record(record)
             records.append(record)
             bar.update(record.time)
@@ -149,6 +155,12 @@ class ReplayWriter:
                 self._MultiArray(layout=layout, data=values),
                 record.time,
             )
+        if record.diagnosis is not None:
+            text = self._String(data=dumps_json(record.diagnosis))
+            self._writer.write(DIAGNOSIS_TOPIC, "std_msgs/msg/String", text, record.time)
+            if record.diagnosis["status"] == "done":
+                error = self._Float64(data=float(record.diagnosis["held_out_error"]))
+                self._writer.write(HELD_OUT_ERROR_TOPIC, FLOAT64, error, record.time)
 
     def __enter__(self) -> ReplayWriter:
         return self

@@ -29,7 +29,7 @@ from itertools import chain
 import numpy as np
 
 from .change import ChangeDetector, block_errors, covering_blocks, fit_gain
-from .dataset import DataError, resample_series
+from .dataset import DataError, Dataset, resample_series
 from .estimators import make_estimator
 from .estimators.base import Estimate, excitation_shortfall
 from .input_checks import (
@@ -69,6 +69,7 @@ CONDITION_LEVELS = {
     "rudder_saturated": WARN,
     "wrong_message_type": WARN,  # reported by the node (ROS graph)
     "estimate_log_failed": WARN,  # reported by the node
+    "missing_effect": WARN,  # reported by the diagnosis on board (online_diagnosis)
 }
 
 # Trust in a new estimate against the last good one (see OnlineIdentifier._distrust).
@@ -113,6 +114,7 @@ class RefitRecord:
     measured_yaw_rate: float = math.nan  # rad/s at the window end
     compute_seconds: float = 0.0  # wall time of the refit
     counts: dict = field(default_factory=dict)  # cumulative input counts by outcome
+    diagnosis: dict | None = None  # the diagnosis that finished at this refit (online_diagnosis), if any
 
     @property
     def level(self) -> int:
@@ -125,7 +127,7 @@ class RefitRecord:
     def to_json(self) -> dict:
         """The ``~/estimate`` / ``replay --json`` record: the identify JSON plus online fields."""
         estimate = self.estimate or {}
-        return {
+        record = {
             "stamp": self.time,
             "status": self.status,
             "conditions": dict(self.conditions),
@@ -144,6 +146,9 @@ class RefitRecord:
             "compute_seconds": self.compute_seconds,
             "counts": dict(self.counts),
         }
+        if self.diagnosis is not None:
+            record["diagnosis"] = self.diagnosis
+        return record
 
 
 class OnlineIdentifier:
@@ -296,17 +301,23 @@ class OnlineIdentifier:
         record.compute_seconds = wallclock.perf_counter() - started
         return record
 
+    def window_dataset(self, now: float) -> Dataset:
+        """The window at clock time ``now`` (s) resampled as a refit resamples it (after the last
+        change, if any); raises DataError when it cannot be resampled."""
+        with self._lock:
+            config = self._config
+            oldest = max(now - config.window_length, self._window_floor)
+            series = {role: _as_array(self._window[role]) for role in ROLES}
+        return _resample(config, {role: s[s[:, 0] >= oldest] for role, s in series.items()})
+
     @staticmethod
     def _prune(window: deque, oldest: float) -> None:
         while window and window[0][0] < oldest:
             window.popleft()
 
     def _fit(self, config: OnlineConfig, series: dict, last_good, record: RefitRecord) -> None:
-        roles = [r for r in ROLES if r != "speed" or config.speed_topic]
         try:
-            dataset = resample_series(
-                {r: (series[r][:, 0], series[r][:, 1]) for r in roles}, config.sample_time, config.gap
-            )
+            dataset = _resample(config, series)
         except DataError as exc:
             record.conditions["refit_failed"] = f"window unusable: {exc}"
             return
@@ -529,6 +540,13 @@ class OnlineIdentifier:
         return float(r[-1]), float(dataset.yaw_rate[-1])
 
 
+def _resample(config: OnlineConfig, series: dict) -> Dataset:
+    """The inputs' (time, value) arrays resampled to ``sample_time``, split at gaps; the speed only
+    when ``speed_topic`` is set."""
+    roles = [r for r in ROLES if r != "speed" or config.speed_topic]
+    return resample_series({r: (series[r][:, 0], series[r][:, 1]) for r in roles}, config.sample_time, config.gap)
+
+
 def _as_array(window: deque) -> np.ndarray:
     """The (time, value) pairs of a window as an (n, 2) array (twice as fast as np.array on tuples)."""
     return np.fromiter(chain.from_iterable(window), dtype=float, count=2 * len(window)).reshape(-1, 2)
@@ -602,13 +620,20 @@ class EstimateScatter:
         return {name: std * factors.get(name, 1.0) for name, std in estimate.std_errors.items()}
 
 
-def run_schedule(identifier: OnlineIdentifier, samples):
+def run_schedule(identifier: OnlineIdentifier, samples, diagnosis=None):
     """Feed time-ordered samples with their own stamps as the clock; yield each refit's record.
 
     This is the node's loop with the bag's time for the node's clock: a refit
     due at a sample's time runs on everything that arrived before it.
+    ``diagnosis`` (an ``online_diagnosis.OnlineDiagnosis``) runs on the window after each refit
+    when due; an effect it adds or removes by itself takes effect from the next refit.
     """
     for sample in samples:
         if identifier.due(sample.time):
-            yield identifier.refit(sample.time)
+            record = identifier.refit(sample.time)
+            if diagnosis is not None:
+                effects = diagnosis.after_refit(record, identifier)
+                if effects is not None:
+                    identifier.reconfigure(replace(identifier.config, effects=effects))
+            yield record
         identifier.add(sample)

@@ -41,6 +41,7 @@ GROUPS = (
     "model",
     "checks and diagnostics",
     "change detection (loading, fouling, damage: a new response restarts the window)",
+    "diagnosis on board (which catalogued effect the model misses, while sailing)",
     "estimate log",
 )
 
@@ -113,6 +114,8 @@ def check_fields(values) -> None:
             raise ConfigError(f"unknown {f.name} {value!r}; choose from {', '.join(s.options())}")
         elif kind is str and not isinstance(value, str):
             raise ConfigError(f"{f.name} must be a string, got {value!r}")
+        elif kind is bool and not isinstance(value, bool):
+            raise ConfigError(f"{f.name} must be true or false, got {value!r}")
 
 
 def _model_description() -> str:
@@ -122,7 +125,7 @@ def _model_description() -> str:
 
 
 TOPIC = "std_msgs/Float64, stamped on arrival with the node clock"
-WINDOW, MODEL, CHECKS, CHANGE, LOG = GROUPS[1:]
+WINDOW, MODEL, CHECKS, CHANGE, DIAGNOSIS, LOG = GROUPS[1:]
 
 
 @dataclass(frozen=True)
@@ -230,6 +233,24 @@ class OnlineConfig:
     change_test_length: float = parameter(
         30.0, "newest data the change test runs the model over", "s", (1.0, 3600.0), group=CHANGE
     )
+    diagnosis_period: float = parameter(
+        60.0,
+        "time between diagnoses of the window (the model fitted on its older 65 %, run free on the newest "
+        "35 %, every catalogued effect tried; ~/diagnosis, ~/held_out_error, missing_effect); 0: off, "
+        "else >= refit_period",
+        "s",
+        (0.0, 86400.0),
+        group=DIAGNOSIS,
+    )
+    auto_add_effects: bool = parameter(
+        False,
+        "add an effect found missing in auto_add_after consecutive diagnoses to effects (announced and "
+        "logged), and remove it again when the held-out error does not fall within two diagnoses",
+        group=DIAGNOSIS,
+    )
+    auto_add_after: int = parameter(
+        3, "consecutive diagnoses naming the same effect before auto_add_effects adds it", "", (1, 100), group=DIAGNOSIS
+    )
 
     def __post_init__(self):
         try:
@@ -252,6 +273,11 @@ class OnlineConfig:
             raise ConfigError(
                 f"gap_threshold must be 0 ({GAP_SAMPLES} sample times) or >= sample_time "
                 f"{self.sample_time} s, got {self.gap_threshold!r}"
+            )
+        if not (self.diagnosis_period == 0 or self.diagnosis_period >= self.refit_period):
+            raise ConfigError(
+                f"diagnosis_period must be 0 (off) or >= refit_period {self.refit_period} s, "
+                f"got {self.diagnosis_period!r}"
             )
         if not (self.change_ratio == 0 or self.change_ratio > 1):
             raise ConfigError(f"change_ratio must be 0 (no change test) or > 1, got {self.change_ratio!r}")
@@ -350,6 +376,8 @@ TABLE_END = "<!-- end of parameters -->"
 
 
 def yaml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, (tuple, list)):
         return "[" + ", ".join(value) + "]"
     if isinstance(value, str):
@@ -373,6 +401,8 @@ def parameter_file() -> str:
 
 
 def markdown_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, (tuple, list)):
         return "[" + ", ".join(value) + "]"
     if isinstance(value, float):

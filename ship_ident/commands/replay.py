@@ -8,7 +8,11 @@ per refit, one per line (JSON lines: the ``~/estimate`` record of the node).
 ``/ship_ident/estimate`` and ``/ship_ident/parameters`` at the refit times,
 as the replay goes: Ctrl-C or SIGTERM stop it after the refit in progress
 and still leave a complete MCAP with every estimate up to then (exit code
-130 or 143).
+130 or 143). ``--diagnosis-period S`` diagnoses the window every S seconds
+as the node does (which effect the model misses, the held-out error against
+the noise floor): each diagnosis goes into the JSON record of its refit and
+into the MCAP (``/ship_ident/diagnosis``, ``/ship_ident/held_out_error``);
+``--diagnosis-plot FILE.png`` draws the held-out error over the trip.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import math
 import signal
 import sys
 import threading
+from pathlib import Path
 
 from ..bag_replay import replay_bag
 from ..errors import CommandError
@@ -48,6 +53,24 @@ def add_parser(subparsers) -> None:
     for name in ("window_length", "refit_period", "min_window_length", "gap_threshold", "change_ratio"):
         add_config_option(parser, name)
     add_config_option(parser, "rudder_limit", degrees=True)
+    add_config_option(parser, "diagnosis_period", default=0.0)
+    parser.add_argument(
+        "--auto-add-effects",
+        action="store_true",
+        help=spec(OnlineConfig, "auto_add_effects").description + " (default: off)",
+    )
+    parser.add_argument(
+        "--auto-add-after",
+        type=int,
+        default=DEFAULTS.auto_add_after,
+        metavar="N",
+        help=spec(OnlineConfig, "auto_add_after").description + " (default %(default)s)",
+    )
+    parser.add_argument(
+        "--diagnosis-plot",
+        metavar="FILE.png",
+        help="draw the held-out error of every diagnosis over the trip, the noise floor and the effects in force",
+    )
     parser.add_argument(
         "--json", action="store_true", help="print one JSON object per refit on stdout, one per line (JSON lines)"
     )
@@ -56,9 +79,9 @@ def add_parser(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
-def add_config_option(parser, name: str, degrees: bool = False) -> None:
-    """``--NAME`` for the OnlineConfig field ``name``: its default, unit, range and description
-    from the one definition (``online_config``); ``degrees``: an angle given in deg."""
+def add_config_option(parser, name: str, degrees: bool = False, default: float | None = None) -> None:
+    """``--NAME`` for the OnlineConfig field ``name``: its default (unless ``default``), unit, range
+    and description from the one definition (``online_config``); ``degrees``: an angle given in deg."""
     s = spec(OnlineConfig, name)
     scale = math.degrees(1.0) if degrees else 1.0
     unit = "deg" if degrees else s.unit
@@ -66,9 +89,9 @@ def add_config_option(parser, name: str, degrees: bool = False) -> None:
     parser.add_argument(
         "--" + name.replace("_", "-"),
         type=float,
-        default=scale * getattr(DEFAULTS, name),
+        default=scale * (getattr(DEFAULTS, name) if default is None else default),
         metavar="DEG" if degrees else (unit.upper() or "X"),
-        help=f"{s.description}; {low:.4g} to {high:.4g}{' ' + unit if unit else ''} (default %(default).6g)",
+        help=f"{s.description.replace('%', '%%')}; {low:.4g} to {high:.4g}{' ' + unit if unit else ''} (default %(default).6g)",
     )
 
 
@@ -86,6 +109,9 @@ def config_from_args(args, topics: Topics, has_speed: bool) -> OnlineConfig:
         change_ratio=args.change_ratio,
         gap_threshold=args.gap_threshold,
         rudder_limit=math.radians(args.rudder_limit),
+        diagnosis_period=args.diagnosis_period,
+        auto_add_effects=args.auto_add_effects,
+        auto_add_after=args.auto_add_after,
         model=args.model,
         effects=args.effects,
         method=args.method,
@@ -93,9 +119,11 @@ def config_from_args(args, topics: Topics, has_speed: bool) -> OnlineConfig:
 
 
 def run(args) -> int:
+    if args.diagnosis_plot and not args.diagnosis_period:
+        raise CommandError("--diagnosis-plot needs --diagnosis-period S (the diagnoses it draws)")
     if len(args.bag) > 1 or args.jobs > 1 or args.table or args.dask:
-        if args.out:
-            raise CommandError("--out takes a single bag; for many bags use --table")
+        if args.out or args.diagnosis_plot:
+            raise CommandError("--out and --diagnosis-plot take a single bag; for many bags use --table")
         topics = topics_from_args(args)
         try:
             return run_fleet(args, args.bag, topics, config_from_args(args, topics, has_speed=True))
@@ -111,6 +139,8 @@ def run(args) -> int:
     def on_record(record):
         if args.json:
             print(dumps_json(record.to_json()), flush=True)
+        elif record.diagnosis is not None:
+            print(diagnosis_text(record.diagnosis), flush=True)
 
     topics = topics_from_args(args)
     handlers = {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
@@ -129,9 +159,103 @@ def run(args) -> int:
             file=sys.stderr,
         )
         return 128 + received[0]
+    if args.diagnosis_plot:
+        try:
+            plot_diagnoses(result.records, args.diagnosis_plot, Path(bag).name)
+        except OSError as exc:
+            raise CommandError(f"cannot write {args.diagnosis_plot}: {exc.strerror or exc}") from None
     if not args.json:
         print_summary(result.records, result.duration, result.wall_seconds)
+        if args.diagnosis_plot:
+            print(f"held-out error plot: {args.diagnosis_plot}")
     return 0
+
+
+def diagnosis_text(diagnosis: dict) -> str:
+    """A finished diagnosis in a few lines, for people (angles in deg)."""
+    head = f"diagnosis at {diagnosis['stamp']:.0f} s ({'+'.join(diagnosis['structure']['effects']) or 'no effects'}):"
+    if diagnosis["status"] != "done":
+        return f"{head} skipped: {diagnosis['reason']}"
+    lines = [
+        f"{head} {diagnosis['verdict']}; held-out yaw-rate error "
+        f"{math.degrees(diagnosis['held_out_error']):.3f} deg/s, noise floor "
+        f"{math.degrees(diagnosis['noise_floor']):.3f} deg/s",
+        f"  {diagnosis['verdict_sentence']}",
+    ]
+    if diagnosis.get("add_command"):
+        lines.append(f"  add it: {diagnosis['add_command']}")
+    if diagnosis.get("auto_add"):
+        lines.append(f"  auto-add: {diagnosis['auto_add']['sentence']}")
+    return "\n".join(lines)
+
+
+def plot_diagnoses(records, path, title: str) -> None:
+    """PNG of the held-out yaw-rate error of every finished diagnosis over the trip (deg/s), the
+    noise floor, the diagnoses that found an effect missing (the effect named where it first
+    appears), and the effects in force as shaded bands."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    diagnoses = [r.diagnosis for r in records if r.diagnosis is not None]
+    done = [d for d in diagnoses if d["status"] == "done"]
+    fig, ax = plt.subplots(figsize=(9, 4))
+    if done:
+        t = [d["stamp"] for d in done]
+        error = [math.degrees(d["held_out_error"]) for d in done]
+        ax.plot(t, error, "o-", ms=4, label="held-out yaw-rate error")
+        ax.plot(t, [math.degrees(d["noise_floor"]) for d in done], "--", color="grey", label="noise floor")
+        missing = [
+            (d["stamp"], e, d["candidates"][0]["effect"])
+            for d, e in zip(done, error)
+            if d["verdict"] == "missing_effect"
+        ]
+        ax.plot(
+            [m[0] for m in missing],
+            [m[1] for m in missing],
+            "o",
+            ms=9,
+            mfc="none",
+            color="tab:red",
+            label="missing_effect",
+        )
+        named = None
+        for stamp, e, effect in missing:
+            if effect != named:
+                ax.annotate(
+                    effect,
+                    (stamp, e),
+                    textcoords="offset points",
+                    xytext=(0, 9),
+                    ha="center",
+                    fontsize=8,
+                    color="tab:red",
+                )
+            named = effect
+        ax.set_ylim(0.0, 1.3 * max(error))
+    spans = []  # [start, end, effects in force]: changed by auto-add at its diagnosis, or from outside
+    for d in diagnoses:
+        effects = "+".join(d["structure"]["effects"]) or "no effects"
+        added = d.get("auto_add")
+        if not spans or spans[-1][2] != effects:
+            spans.append([records[0].time if not spans else d["stamp"], d["stamp"], effects])
+        if added and added["action"] != "kept":
+            spans.append([d["stamp"], d["stamp"], "+".join(added["effects"]) or "no effects"])
+    if spans:
+        spans[-1][1] = records[-1].time
+    for k, (start, _, effects) in enumerate(spans):
+        end = spans[k + 1][0] if k + 1 < len(spans) else spans[-1][1]
+        ax.axvspan(start, end, color=f"C{k % 10}", alpha=0.1, lw=0)
+        ax.text(start, 0.98, " " + effects, transform=ax.get_xaxis_transform(), va="top", fontsize=7)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("deg/s")
+    ax.set_title(f"{title}: held-out free-run error of each diagnosis; effects in force shaded", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower left", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 def print_summary(records, duration: float, wall: float) -> None:

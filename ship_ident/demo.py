@@ -99,7 +99,7 @@ class Listener:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
-        from std_msgs.msg import Float64MultiArray, String
+        from std_msgs.msg import Float64, Float64MultiArray, String
 
         os.environ.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
         self.context = rclpy.Context()
@@ -110,11 +110,19 @@ class Listener:
         self.estimates: list[dict] = []
         self.parameters: list = []
         self.diagnostics: list = []
+        self.diagnoses: list[dict] = []  # ~/diagnosis
+        self.held_out_errors: list[float] = []  # ~/held_out_error, rad/s
         self.node.create_subscription(
             String, f"/{node_name}/estimate", lambda m: self.estimates.append(json.loads(m.data)), 100
         )
         self.node.create_subscription(Float64MultiArray, f"/{node_name}/parameters", self.parameters.append, 100)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.diagnostics.extend(m.status), 100)
+        self.node.create_subscription(
+            String, f"/{node_name}/diagnosis", lambda m: self.diagnoses.append(json.loads(m.data)), 100
+        )
+        self.node.create_subscription(
+            Float64, f"/{node_name}/held_out_error", lambda m: self.held_out_errors.append(m.data), 100
+        )
 
     def spin(self, seconds: float, until=None) -> bool:
         """Process messages for up to ``seconds``; stop early once ``until()`` is true."""

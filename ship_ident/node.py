@@ -8,6 +8,13 @@ callbacks never wait for a fit, and a refit still running when the next is
 due is skipped and reported. Outputs: ``~/parameters``
 (Float64MultiArray, names in ``layout.dim[0].label``), ``~/estimate`` (JSON
 String), ``~/predicted_yaw_rate`` (Float64, rad/s) and ``/diagnostics``.
+Every ``diagnosis_period`` the window is diagnosed (``online_diagnosis``) in a
+child process at low priority, off the refit path: ``~/diagnosis`` (JSON
+String: verdict, candidates, held-out error, noise floor, the ``ros2 param
+set`` that adds the missing effect), ``~/held_out_error`` (Float64, rad/s)
+and a ``missing_effect`` WARN in ``/diagnostics``; with ``auto_add_effects``
+the node adds (and may remove again) an effect itself, through its own
+``effects`` parameter, and logs it.
 Once per refit the ROS graph is checked for publishers of another message
 type on the input topics (DDS never delivers those; reported). With
 ``log_directory`` set, every accepted estimate is appended to rotated
@@ -36,6 +43,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
@@ -46,6 +54,7 @@ from .io import FLOAT64, IMU, Sample, imu_samples
 from .jsonio import dumps_json
 from .online import CONDITION_LEVELS, OnlineIdentifier
 from .online_config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
+from .online_diagnosis import DiagnosisWorker, OnlineDiagnosis
 
 NODE_NAME = "ship_ident"
 TICKS_PER_REFIT = 5  # the schedule is checked this many times per refit period
@@ -105,6 +114,10 @@ class IdentifierNode(Node):
         self.estimate_pub = self.create_publisher(String, "~/estimate", 10)
         self.predicted_pub = self.create_publisher(Float64, "~/predicted_yaw_rate", 10)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.diagnosis_pub = self.create_publisher(String, "~/diagnosis", 10)
+        self.held_out_error_pub = self.create_publisher(Float64, "~/held_out_error", 10)
+        self.diagnosis = OnlineDiagnosis(DiagnosisWorker(), self.get_fully_qualified_name())
+        self._auto_effects = None  # effects auto-add asked for, set from the executor thread
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="refit")
         self._running = None  # Future of the refit in progress
         self._overruns = 0  # refits skipped since the last published record
@@ -207,6 +220,11 @@ class IdentifierNode(Node):
 
     # --- refits ----------------------------------------------------------
     def _on_tick(self) -> None:
+        effects, self._auto_effects = self._auto_effects, None
+        if effects is not None:
+            result = self.set_parameters([Parameter("effects", Parameter.Type.STRING_ARRAY, list(effects))])[0]
+            if not result.successful:
+                self.get_logger().error(f"auto-add could not set effects {list(effects)}: {result.reason}")
         now = self._now()
         if not self.identifier.due(now):
             return
@@ -225,6 +243,9 @@ class IdentifierNode(Node):
         """Worker thread: refit and publish; any failure is reported, never raised."""
         try:
             record = self.identifier.refit(now)
+            effects = self.diagnosis.after_refit(record, self.identifier)
+            if effects is not None:
+                self._auto_effects = effects
             with self._overrun_lock:
                 overruns, self._overruns = self._overruns, 0
             if overruns:
@@ -267,6 +288,18 @@ class IdentifierNode(Node):
             values["rmse_yaw_rate"] = f"{data['fit'].get('rmse_yaw_rate', math.nan):.6g}"
         values["refit_seconds"] = f"{record.compute_seconds:.4f}"
         self._publish_diagnostics(record.time, record.level, record.conditions, values)
+        if record.diagnosis is not None:
+            self._publish_diagnosis(record.diagnosis)
+
+    def _publish_diagnosis(self, diagnosis: dict) -> None:
+        """``~/diagnosis`` (JSON), ``~/held_out_error`` (rad/s) and auto-add's announcement in the log."""
+        self.diagnosis_pub.publish(String(data=dumps_json(diagnosis)))
+        if diagnosis["status"] == "done":
+            self.held_out_error_pub.publish(Float64(data=float(diagnosis["held_out_error"])))
+        auto_add = diagnosis.get("auto_add")
+        if auto_add:
+            log = self.get_logger().info if auto_add["action"] == "kept" else self.get_logger().warning
+            log(f"auto-add: {auto_add['sentence']}")
 
     def _publish_diagnostics(self, now: float, level: int, conditions: dict, values: dict) -> None:
         status = DiagnosticStatus(
@@ -287,6 +320,7 @@ class IdentifierNode(Node):
         """Stop the timer and wait for a refit in progress."""
         self.destroy_timer(self._timer)
         self._worker.shutdown(wait=True, cancel_futures=True)
+        self.diagnosis.close()
 
 
 def main(argv=None) -> int:

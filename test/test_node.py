@@ -262,3 +262,58 @@ def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id,
     logged = [json.loads(line) for line in (tmp_path / "estimates" / "estimates.jsonl").read_text().splitlines()]
     assert len(published) >= 5 and all(e["new_estimate"] for e in logged)
     assert [e["stamp"] for e in logged][-len(published) :] == [e["stamp"] for e in published]
+
+
+@pytest.mark.slow
+def test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added(env, domain_id, tmp_path):
+    """A bag whose gyro reads 0.5 deg/s high, played at 10x to a node with a 90 s window diagnosed
+    every 15 s: ~/diagnosis names gyro_bias within three periods after the window fills, with the
+    command that adds it; adding it over the parameter service makes the published held-out error
+    fall by at least half within two windows."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    window, period = 90.0, 15.0
+    sim = simulate("random", effects=("rudder_offset", "cubic_yaw", "gyro_bias"), duration=300.0, seed=1)
+    path = tmp_path / "gyro.mcap"
+    write_simulation(sim, path, "mcap")
+    node = node_process(env, f"window_length:={window}", f"diagnosis_period:={period}")
+    listener = Listener(domain_id)
+    play = start_play(env, path, 10.0, stderr=subprocess.DEVNULL)
+    client = AsyncParameterClient(listener.node, "ship_ident")
+    done = listener.diagnoses  # appended as they arrive; skipped ones too
+
+    def named():
+        return next((d for d in done if d.get("verdict") == "missing_effect"), None)
+
+    try:
+        assert listener.spin(40.0, named), done
+        found = named()
+        assert found["candidates"][0]["effect"] == "gyro_bias" and found["candidates"][0]["significant"]
+        assert found["stamp"] <= window + 3 * period + 5.0  # + the node clock's start after the bag's
+        command = 'ros2 param set /ship_ident effects "[rudder_offset, cubic_yaw, gyro_bias]"'
+        assert found["add_command"] == command
+        before = found["held_out_error"]
+        assert before > 2 * found["noise_floor"]
+        assert client.wait_for_services(timeout_sec=10.0)
+        effects = ["rudder_offset", "cubic_yaw", "gyro_bias"]
+        future = client.set_parameters([Parameter("effects", Parameter.Type.STRING_ARRAY, effects)])
+        assert listener.spin(10.0, future.done) and future.result().results[0].successful
+        added_at = listener.estimates[-1]["stamp"]
+
+        def fallen():
+            return any(
+                d["structure"]["effects"] == effects and d.get("held_out_error", math.inf) <= 0.5 * before for d in done
+            )
+
+        assert listener.spin(40.0, fallen), done
+        # ~/held_out_error, the curve the crew plots, falls too
+        assert listener.spin(5.0, lambda: min(listener.held_out_errors) <= 0.5 * before), listener.held_out_errors
+        assert node.poll() is None
+    finally:
+        code, log = shut_down(node, listener, play)
+    assert code == 0, log
+    after = next(d for d in done if d["structure"]["effects"] == effects and d["status"] == "done")
+    assert after["held_out_error"] <= 0.5 * before and after["stamp"] <= added_at + 2 * window
+    warnings = [kv.value for s in listener.diagnostics for kv in s.values if kv.key == "condition/missing_effect"]
+    assert warnings and "gyro_bias is missing" in warnings[0] and command in warnings[0]

@@ -91,7 +91,8 @@ def add_config_option(parser, name: str, degrees: bool = False, default: float |
         type=float,
         default=scale * (getattr(DEFAULTS, name) if default is None else default),
         metavar="DEG" if degrees else (unit.upper() or "X"),
-        help=f"{s.description.replace('%', '%%')}; {low:.4g} to {high:.4g}{' ' + unit if unit else ''} (default %(default).6g)",
+        help=f"{s.description.replace('%', '%%')}; {low:.4g} to {high:.4g}{' ' + unit if unit else ''} "
+        "(default %(default).6g)",
     )
 
 

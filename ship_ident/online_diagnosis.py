@@ -282,7 +282,7 @@ class OnlineDiagnosis:
         finished = self.runner.poll()
         change = None
         if finished is not None:
-            change = self._finish(finished, config)
+            change = self.finish(finished, config)
             record.diagnosis = finished
         if self._warning is not None and self._warning[0] == structure:
             record.conditions["missing_effect"] = self._warning[1]
@@ -311,13 +311,18 @@ class OnlineDiagnosis:
             self._rejected.clear()
         self._asked = None
 
-    def _finish(self, result: dict, config) -> tuple | None:
-        """Pool the finished diagnosis ``result`` (completed in place: pooled ``significant`` and
-        ``pooled_t``, the verdict, the ``ros2 param set`` command) and run auto-add."""
+    def finish(self, result: dict, config) -> tuple | None:
+        """Take a finished diagnosis ``result`` of the model configured in ``config``: complete it in
+        place (each candidate's pooled ``significant`` and ``pooled_t``, the verdict, the ``ros2
+        param set`` command), keep the ``missing_effect`` warning, run auto-add; return the effects
+        auto-add sets (None: unchanged). A skipped diagnosis, or one of another model than
+        ``config``'s (it started before a change), changes nothing."""
         structure = (result["structure"]["model"], tuple(result["structure"]["effects"]))
         current = structure == (config.model, tuple(config.effects))
         if result["status"] != "done" or not current:
             return None
+        if self._history and self._history[-1]["structure"] != result["structure"]:
+            self._history.clear()  # pooled over diagnoses of one model only
         self._history.append(result)
         found = self._pool(result)
         effects = structure[1]

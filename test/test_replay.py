@@ -81,12 +81,45 @@ def test_replay_out_mcap_reads_back_with_estimates(bag, tmp_path):
         (["/nonexistent/bag.mcap"], "does not exist"),
         (["{bag}", "--effects", "barnacles"], "unknown effect"),
         (["{bag}", "--window-length", "-5"], "window_length"),
+        (["{bag}", "--diagnosis-plot", "p.png"], "--diagnosis-plot needs --diagnosis-period"),
+        (["{bag}", "--diagnosis-period", "2"], "diagnosis_period must be 0 (off) or >= refit_period"),
     ],
 )
 def test_replay_bad_input_is_one_line(bag, args, message):
     result = replay(*[a.format(bag=bag[0]) for a in args])
     assert result.returncode == 2
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_replay_diagnoses_the_trip_into_the_records_the_mcap_and_a_plot(bag, tmp_path):
+    """Nothing hidden: every diagnosis in the record of its refit and on its own MCAP topics, the
+    held-out error at the noise floor, no missing_effect; printed for people; the plot is written."""
+    path, _ = bag
+    out, plot = tmp_path / "diagnosed.mcap", tmp_path / "held_out.png"
+    args = ["--window-length", 120, "--refit-period", 10, "--diagnosis-period", 60, "--out", out]
+    result = replay(path, *args, "--diagnosis-plot", plot)
+    assert result.returncode == 0, result.stderr
+    assert "diagnosis at 130 s (rudder_offset+cubic_yaw): " in result.stdout and "noise floor" in result.stdout
+    with AnyReader([out], default_typestore=typestore()) as reader:
+        written = {
+            topic: [
+                reader.deserialize(raw, c.msgtype).data
+                for c, _, raw in reader.messages([c for c in reader.connections if c.topic == topic])
+            ]
+            for topic in ("/ship_ident/estimate", "/ship_ident/diagnosis", "/ship_ident/held_out_error")
+        }
+    records = [json.loads(text) for text in written["/ship_ident/estimate"]]
+    diagnoses = [r["diagnosis"] for r in records if "diagnosis" in r]
+    assert [d["stamp"] for d in diagnoses] == [r["stamp"] for r in records if "diagnosis" in r]
+    assert [d["stamp"] for d in diagnoses] == pytest.approx([70, 130, 190, 250])
+    assert diagnoses[0]["status"] == "skipped" and "the window holds 70 s" in diagnoses[0]["reason"]
+    done = diagnoses[1:]
+    assert all(d["status"] == "done" and d["verdict"] != "missing_effect" for d in done)
+    assert all(d["held_out_error"] < 1.25 * d["noise_floor"] for d in done)
+    assert not any("missing_effect" in r["conditions"] for r in records)
+    assert [json.loads(text) for text in written["/ship_ident/diagnosis"]] == diagnoses
+    assert written["/ship_ident/held_out_error"] == [d["held_out_error"] for d in done]
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def estimates_in(path) -> list[dict]:

@@ -254,19 +254,19 @@ class OnlineDiagnosis:
         self.node = node
         self._next_due: float | None = None
         self._history: deque = deque(maxlen=POOLED_DIAGNOSES)  # done diagnoses of one model, oldest first
-        self._warning: tuple | None = None  # (structure label, sentence) of the last missing_effect
+        self._warning: tuple | None = None  # ((model, effects), sentence) of the last missing_effect
         self._streak: tuple[str, int] = ("", 0)  # effect named in consecutive diagnoses, how many
         self._trial: Trial | None = None
         self._rejected: set[str] = set()  # effects auto-add removed (not added again)
-        self._effects: tuple | None = None  # (model, effects) in force at the last refit
+        self._in_force: tuple | None = None  # (model, effects) at the last refit
         self._asked: tuple | None = None  # effects auto-add asked for (its own change, not an outside one)
 
     def after_refit(self, record, identifier) -> tuple | None:
         config = identifier.config
         structure = (config.model, tuple(config.effects))
-        if self._effects is not None and structure != self._effects:
+        if self._in_force is not None and structure != self._in_force:
             self._model_changed(structure)
-        self._effects = structure
+        self._in_force = structure
         now = record.time
         if config.diagnosis_period > 0 and self._is_due(now, config.diagnosis_period):
             refusal = self.runner.refusal(now)

@@ -74,6 +74,16 @@ def skipped(stamp: float, model: str, effects, reason: str) -> dict:
     }
 
 
+def too_short(dataset: Dataset) -> str | None:
+    """Why the window is too short for a diagnosis (it must hold out ``MIN_HELD_OUT_S``), or None."""
+    if dataset.duration >= MIN_WINDOW_S:
+        return None
+    return (
+        f"the window holds {dataset.duration:.0f} s; a diagnosis needs {MIN_WINDOW_S:.0f} s "
+        f"({MIN_HELD_OUT_S:.0f} s held out)"
+    )
+
+
 def diagnose_window(dataset: Dataset, model: str, effects: tuple, stamp: float) -> dict:
     """The diagnosis of one window at clock time ``stamp`` (s), as a JSON-ready dict: ``status``
     ``done`` with the window's own verdict, candidates, held-out error and noise floor (rad/s),
@@ -81,14 +91,7 @@ def diagnose_window(dataset: Dataset, model: str, effects: tuple, stamp: float) 
     started = time.process_time()
     record = skipped(stamp, model, effects, "")
     record["window"] = {"start": float(dataset.time[0]), "end": float(dataset.time[-1])}
-    reason = None
-    if dataset.duration < MIN_WINDOW_S:
-        reason = (
-            f"the window holds {dataset.duration:.0f} s; a diagnosis needs {MIN_WINDOW_S:.0f} s "
-            f"({MIN_HELD_OUT_S:.0f} s held out)"
-        )
-    else:
-        reason = excitation_shortfall(dataset)
+    reason = too_short(dataset) or excitation_shortfall(dataset)
     if reason is None:
         try:
             result = diagnose(dataset, model, effects, workers=1)
@@ -154,8 +157,7 @@ class InlineRunner:
 
 
 def _serve(connection) -> None:
-    """Child process: diagnose each job received, send back the result, at low priority."""
-    os.nice(NICENESS)
+    """Child process: diagnose each job received, send back the result."""
     while True:
         try:
             job = connection.recv()
@@ -197,6 +199,7 @@ class DiagnosisWorker:
             self._connection, child = context.Pipe()
             self._process = context.Process(target=_serve, args=(child,), name="ship_ident diagnosis", daemon=True)
             self._process.start()
+            os.setpriority(os.PRIO_PROCESS, self._process.pid, NICENESS)  # before its imports, not after
             child.close()
         self._job = (job[3], job[1], job[2])
         self._connection.send(job)
@@ -276,7 +279,9 @@ class OnlineDiagnosis:
                 except DataError as exc:
                     refusal = f"window unusable: {exc}"
                 else:
-                    self.runner.submit((dataset, config.model, tuple(config.effects), now))
+                    refusal = too_short(dataset)  # said here: no process started for it
+                    if refusal is None:
+                        self.runner.submit((dataset, config.model, tuple(config.effects), now))
             if refusal is not None:
                 record.diagnosis = skipped(now, config.model, config.effects, refusal)
         finished = self.runner.poll()

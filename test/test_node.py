@@ -266,7 +266,7 @@ def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id,
 
 @pytest.mark.slow
 def test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added(env, domain_id, tmp_path):
-    """A bag whose gyro reads 0.5 deg/s high, played at 10x to a node with a 90 s window diagnosed
+    """A bag whose gyro reads 0.5 deg/s high, played at 5x to a node with a 90 s window diagnosed
     every 15 s: ~/diagnosis names gyro_bias within three periods after the window fills, with the
     command that adds it; adding it over the parameter service makes the published held-out error
     fall by at least half within two windows."""
@@ -274,12 +274,12 @@ def test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added
     from rclpy.parameter_client import AsyncParameterClient
 
     window, period = 90.0, 15.0
-    sim = simulate("random", effects=("rudder_offset", "cubic_yaw", "gyro_bias"), duration=300.0, seed=1)
+    sim = simulate("random", effects=("rudder_offset", "cubic_yaw", "gyro_bias"), duration=400.0, seed=1)
     path = tmp_path / "gyro.mcap"
     write_simulation(sim, path, "mcap")
     node = node_process(env, f"window_length:={window}", f"diagnosis_period:={period}")
     listener = Listener(domain_id)
-    play = start_play(env, path, 10.0, stderr=subprocess.DEVNULL)
+    play = start_play(env, path, 5.0, stderr=subprocess.DEVNULL)  # a loaded machine slows the diagnoses
     client = AsyncParameterClient(listener.node, "ship_ident")
     done = listener.diagnoses  # appended as they arrive; skipped ones too
 
@@ -287,7 +287,7 @@ def test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added
         return next((d for d in done if d.get("verdict") == "missing_effect"), None)
 
     try:
-        assert listener.spin(40.0, named), done
+        assert listener.spin(60.0, named), done
         found = named()
         assert found["candidates"][0]["effect"] == "gyro_bias" and found["candidates"][0]["significant"]
         assert found["stamp"] <= window + 3 * period + 5.0  # + the node clock's start after the bag's
@@ -306,7 +306,7 @@ def test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added
                 d["structure"]["effects"] == effects and d.get("held_out_error", math.inf) <= 0.5 * before for d in done
             )
 
-        assert listener.spin(40.0, fallen), done
+        assert listener.spin(60.0, fallen), done
         # ~/held_out_error, the curve the crew plots, falls too
         assert listener.spin(5.0, lambda: min(listener.held_out_errors) <= 0.5 * before), listener.held_out_errors
         assert node.poll() is None

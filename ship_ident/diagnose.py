@@ -623,21 +623,30 @@ def _rebase(structure: Structure, training: Dataset, method: str, estimate: Esti
     times the first fit's and below ``REBASE_AT_NOISE`` noise levels (None otherwise).
     A slow ship's output-error search can stop in a local minimum (KVLCC2-like zigzags: T1 = T2,
     T3 = 0, a residual five times the noise) that any candidate's extra starting points escape;
-    judging the candidates against that minimum would credit them with the base model's failure."""
+    judging the candidates against that minimum would credit them with the base model's failure.
+    A candidate whose effect has a base equivalent other than itself without the effect (a stable
+    course_instability fit is a rescaled Nomoto model) is refined on its own: on a slow ship's
+    zigzag the starts' short-horizon costs hardly differ, and the search would go on from another."""
     estimator = make_estimator(method)
-    starts = [
-        {k: r.parameters[k] for k in structure.parameter_names if k in r.parameters}
-        for r in refits
-        if isinstance(r, Estimate)
-    ]
+    fitted = [r for r in refits if isinstance(r, Estimate)]
     if (
         not estimator.uses_starts
-        or not starts
+        or not fitted
         or "cost_ratio" not in estimate.info
         or "oe_not_converged" not in estimate.flags
     ):
         return None
-    refit = estimator.fit(structure, training, starts=(estimate.parameters, *starts))
+
+    def base_start(parameters: dict) -> dict:
+        return {k: parameters[k] for k in structure.parameter_names}
+
+    plain, rescaled = [], []
+    for r in fitted:
+        start = base_start(EFFECTS[r.structure.effect_names[-1]].base_equivalent(r.parameters))
+        (plain if start == base_start(r.parameters) else rescaled).append(start)
+    tries = [estimator.fit(structure, training, starts=(estimate.parameters, *plain))]
+    tries += [estimator.fit(structure, training, starts=(start,)) for start in rescaled]
+    refit = min(tries, key=lambda t: t.info["cost_ratio"])
     ratio = refit.info["cost_ratio"]
     return refit if ratio < REBASE_GAIN * estimate.info["cost_ratio"] and ratio < REBASE_AT_NOISE else None
 

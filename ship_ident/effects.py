@@ -143,6 +143,11 @@ class Effect:
         where a fit with the effect can start (every effect here vanishes at zero)."""
         return {p.name: 0.0 for p in self.parameters if p.name not in getattr(self, "fixed", ())}
 
+    def base_equivalent(self, p: dict) -> dict:
+        """Base-model parameters that move most like the model with this effect at ``p``: a start
+        for refitting the model without it (here: the effect dropped, the base parameters kept)."""
+        return dict(p)
+
     def starts(self, context: StartContext) -> list[dict]:
         """Extra starting points (full parameter sets) for a fit with this effect, for parameters
         that enter non-smoothly or have several minima: a local search from the model without
@@ -433,6 +438,22 @@ class CourseInstability(Effect):
 
     def from_coefficients(self, coefficients, base):
         return self.neutral()
+
+    def base_equivalent(self, p):
+        """With a stable linear damping (n1 > 0) and little cubic damping the model is a Nomoto
+        model divided by n1: K / n1, T / n1 (first order), and T1, T2 the roots of
+        s^2 T1 T2 / n1 + s (T1 + T2) / n1 + 1 (second order; equal when they would be complex)."""
+        n1 = p.get("n1", 1.0)
+        if n1 <= 0.0:
+            return dict(p)
+        out = dict(p, K=p["K"] / n1)
+        if "T" in p:
+            out["T"] = p["T"] / n1
+        else:
+            total, product = (p["T1"] + p["T2"]) / n1, p["T1"] * p["T2"] / n1
+            spread = np.sqrt(max(total**2 - 4.0 * product, 0.0))
+            out["T1"], out["T2"] = (total + spread) / 2.0, max((total - spread) / 2.0, 1e-3)
+        return out
 
     def starts(self, context):
         """The sign of the linear damping: a search from n1 = 1 never crosses the unstable region

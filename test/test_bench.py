@@ -12,6 +12,8 @@ from ship_ident.dataset import Dataset
 from ship_ident.estimators import DEFAULT_METHOD
 from ship_ident.simulator import simulate
 
+pytestmark = pytest.mark.slow  # each test runs a benchmark's quick variant
+
 
 def test_benchmarks_register_themselves_by_name():
     assert {"seed-table2", "efficiency", "speed"} <= set(benchmarks())

@@ -85,6 +85,7 @@ def test_identify_json_follows_the_contract(ols_records):
     assert record["fit"]["horizon"] == "free-run"
 
 
+@pytest.mark.slow
 def test_identify_json_as_subprocess_prints_only_json(clean_files, ship_ident_cli, tmp_path):
     paths, _ = clean_files
     result = ship_ident_cli(
@@ -153,6 +154,7 @@ def assert_one_line_error(result, words):
     assert words in lines[0] and result.stdout == ""
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", BAD_INPUTS)
 def test_identify_bad_data_exits_2_with_one_line(kind, tmp_path, clean_files, ship_ident_cli):
     paths, _ = clean_files
@@ -160,6 +162,7 @@ def test_identify_bad_data_exits_2_with_one_line(kind, tmp_path, clean_files, sh
     assert_one_line_error(ship_ident_cli("identify", bad, "--json"), BAD_INPUTS[kind])
 
 
+@pytest.mark.slow
 def test_bad_arguments_exit_2_with_one_line(tmp_path, clean_files, ship_ident_cli):
     paths, _ = clean_files
     not_a_model = tmp_path / "model.json"
@@ -251,6 +254,7 @@ def test_joint_fit_of_two_recordings_beats_either_alone():
     assert mean["joined"] < 0.7 * min(mean["zigzag"], mean["turning"])
 
 
+@pytest.mark.slow
 def test_compare_and_diagnose_take_several_recordings(short_runs, tmp_path):
     model = tmp_path / "model.json"
     assert run_main("identify", short_runs["zigzag"], "--method", "rwlssvm", "--save", model)[0] == 0
@@ -279,6 +283,7 @@ def test_compare_and_diagnose_take_several_recordings(short_runs, tmp_path):
     assert not any(c["significant"] for c in record["candidates"])
 
 
+@pytest.mark.slow
 def test_columns_by_name_and_synonyms_on_the_command_line(clean_files, ship_ident_cli, tmp_path):
     """A public simulator's CSV (speed named surge_speed) is read without options, the mapping said
     on one stderr line; own names through --columns; an unknown column is one line and exit 2."""

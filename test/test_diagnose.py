@@ -10,7 +10,7 @@ import pytest
 
 from ship_ident import cli
 from ship_ident.dataset import join_recordings
-from ship_ident.diagnose import _fit, diagnose, extrapolation
+from ship_ident.diagnose import _fit, diagnose, extrapolation, free_run
 from ship_ident.effects import EFFECTS
 from ship_ident.simulator import simulate
 from ship_ident.structure import Structure
@@ -34,6 +34,7 @@ def _data(effects, parameters=None, seed=1):
     return simulate("random", "seed001", effects=effects, duration=DURATION, seed=seed, parameters=parameters).dataset
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", HIDDEN)
 def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
     dataset = _data((effect,), HIDDEN[effect])
@@ -51,6 +52,7 @@ def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
     assert getattr(top, key) >= 0.5, figures
 
 
+@pytest.mark.slow
 def test_validation_on_another_manoeuvre_finds_the_hidden_effect():
     """Fit on all of one recording, hold out a different manoeuvre (cross-manoeuvre judging)."""
     training = _data(("wind_yaw",))
@@ -66,6 +68,7 @@ def test_nothing_hidden_is_adequate():
     assert result.residual_tests["cross_correlation_outside"] < 0.2
 
 
+@pytest.mark.slow
 def test_two_hidden_effects_are_solved_in_two_rounds():
     dataset = _data(("rudder_offset", "rudder_delay"))
     found = []
@@ -129,6 +132,7 @@ def test_docs_added_effect_example_runs():
     reason=f"KVLCC2 data not found at {KVLCC2} (../shared/data/"
     "kvlcc2_marin: measured MARIN model tests, not shipped with the package)",
 )
+@pytest.mark.slow
 def test_kvlcc2_walk_through(tmp_path, capsys):
     """docs/diagnose.md's walk-through on measured data: nomoto1 fitted on the 10/10 zigzag and run
     free on both 20/20 zigzags misses cubic_yaw; adding it cuts the 20/20 error by two thirds."""
@@ -239,6 +243,7 @@ NEW_EFFECTS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("effect", NEW_EFFECTS)
 def test_effects_real_hulls_need_are_named_first_with_their_parameters(effect):
     """Course instability (n1 < 0), r|r| damping and rudder stall hidden on seed001: named first,
@@ -256,3 +261,18 @@ def test_effects_real_hulls_need_are_named_first_with_their_parameters(effect):
     name = next(iter(truth))
     assert top.estimate.parameters[name] == pytest.approx(truth[name], rel=0.3)
     assert result.verdict != "adequate"
+
+
+@pytest.mark.parametrize("model", ["nomoto1", "nomoto2"])
+def test_a_stable_course_instability_fit_is_a_rescaled_nomoto_model(model):
+    """T1 T2 r'' + (T1 + T2) r' + n1 r = K (delta + T3 delta') with n1 > 0 and no cubic damping moves
+    exactly as the Nomoto model divided by n1: its base_equivalent free-runs the same yaw rate."""
+    data = simulate("zigzag10", duration=300.0, seed=3).dataset
+    base = {"K": 0.2, "T": 8.0} if model == "nomoto1" else {"K": 0.2, "T1": 8.0, "T2": 0.6, "T3": 1.2}
+    unstable = dict(base, n1=0.4, n3=0.0)
+    equivalent = EFFECTS["course_instability"].base_equivalent(unstable)
+    assert equivalent["K"] == pytest.approx(0.5)
+    with_effect = free_run(Structure(model, ("course_instability",)), unstable, data)
+    without = free_run(Structure(model, ()), {k: equivalent[k] for k in base}, data)
+    scale = np.std(with_effect.yaw_rate)
+    assert scale > 0.005 and np.max(np.abs(with_effect.yaw_rate - without.yaw_rate)) < 1e-3 * scale

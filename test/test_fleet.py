@@ -12,6 +12,8 @@ from ship_ident.fleet import FleetError, add_fleet_arguments, run_fleet, vessel_
 from ship_ident.io import write_simulation
 from ship_ident.simulator import simulate
 
+pytestmark = pytest.mark.slow  # a fleet of bags, a local dask cluster
+
 TRUE_K = {"alpha": 0.5883, "bravo": 0.40}
 
 

@@ -52,6 +52,7 @@ def test_bound_with_rudder_noise_tends_to_the_known_rudder_bound():
     assert noisy["delta_r"] > 1.3 * known["delta_r"]  # the offset competes with the rudder noise most
 
 
+@pytest.mark.slow
 def test_prediction_error_reaches_the_bound_with_a_noisy_rudder():
     """12 noise seeds of a 180 s 20/20 zigzag (rudder 0.1 deg): the prediction-error refinement is
     within 1.3x of the bound on K and on T1+T2-T3, the output-error one is not (it is biased; measured

@@ -136,6 +136,7 @@ def test_gap_and_stale_input_are_reported(sim):
     assert record.status == "WARN"
 
 
+@pytest.mark.slow
 def test_replay_schedule_recovers_truth(sim):
     ident = OnlineIdentifier(OnlineConfig())
     records = list(run_schedule(ident, stream(sim.dataset)))
@@ -182,6 +183,7 @@ def settled_after(times, ks, truth, since):
     return outside.max() + 5.0 if len(outside) else since
 
 
+@pytest.mark.slow
 def test_a_changed_vessel_restarts_the_window():
     """K -30 % and T1 +30 % at 400 s (loaded mid-trip): the change test finds it, the window
     restarts within a few seconds of it, and K is back within 5 % long before the 180 s window
@@ -210,6 +212,7 @@ def test_variance_step_is_located_to_a_few_samples():
     assert abs(variance_change_point(errors**2) - 370) <= 5
 
 
+@pytest.mark.slow
 def test_no_change_alarm_on_a_steady_vessel():
     sim = simulate("mixed", duration=900.0, seed=5)
     records = list(run_schedule(OnlineIdentifier(OnlineConfig()), stream(sim.dataset)))
@@ -239,6 +242,7 @@ def test_clock_jump_forward_restarts_schedule_and_keeps_recent_window(sim):
     assert all(r.time - q.time == 5.0 for q, r in zip(records, records[1:]))
 
 
+@pytest.mark.slow
 def test_dropouts_of_one_topic_for_5_s_and_5_min(sim):
     ident = OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0))
     samples = [
@@ -256,6 +260,7 @@ def test_dropouts_of_one_topic_for_5_s_and_5_min(sim):
     assert all("no_data" in records[t].conditions for t in (250.0, 295.0))
 
 
+@pytest.mark.slow
 def test_heading_in_degrees_is_reported(sim):
     degrees = [
         Sample(s.time, s.role, math.degrees(s.value) if s.role == "heading" else s.value)
@@ -288,6 +293,7 @@ def test_heading_in_degrees_on_a_steady_course_shows_in_its_wraps():
     assert "steps by about 360" in ident.refit(40.0).conditions["heading_in_degrees"]
 
 
+@pytest.mark.slow
 def test_yaw_rate_in_the_other_sign_convention_is_reported(sim):
     flipped = [
         Sample(s.time, s.role, -s.value if s.role == "yaw_rate" else s.value)
@@ -299,6 +305,7 @@ def test_yaw_rate_in_the_other_sign_convention_is_reported(sim):
     assert not any(r.new_estimate for r in records)  # K < 0 is never accepted
 
 
+@pytest.mark.slow
 def test_saturated_rudder_is_reported_but_zigzag_is_not():
     zigzag = simulate("zigzag20", duration=200.0, seed=3)
     records = list(
@@ -316,6 +323,7 @@ def test_saturated_rudder_is_reported_but_zigzag_is_not():
     assert "too_little_excitation" in records[-1].conditions and not records[-1].new_estimate
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["rwlssvm", "rwlssvm+oe"])
 def test_spikes_of_50_times_the_noise_move_K_less_than_3_percent(sim, method):
     """1 % of all samples (rudder, heading, yaw rate) off by 50 noise standard deviations.
@@ -372,6 +380,7 @@ def test_estimate_log_in_an_unwritable_place_is_a_config_error(tmp_path):
         EstimateLog(tmp_path / "file" / "logs")
 
 
+@pytest.mark.slow
 def test_change_test_survives_a_clock_jump_back():
     """A clock reset (bag looped, simulator restarted) keeps detecting changes on the new time line."""
     sim = simulate("zigzag20", duration=700.0, seed=31, change=(400.0, LOADED))
@@ -383,6 +392,7 @@ def test_change_test_survives_a_clock_jump_back():
     assert alarms and 400.0 < alarms[0] <= 430.0
 
 
+@pytest.mark.slow
 def test_nothing_absurd_is_published_after_a_vessel_changes():
     """The issue's scenario: a second-order vessel (T1 10.6 s, random rudder steps of +-25 deg) loses
     30 % of its gain while T1 grows 30 %: every estimate published as new is near the truth of its
@@ -462,6 +472,7 @@ def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
     assert steady.honest(estimate(0.1, 200.0)) == {"K": 0.001, "T": 1.0}
 
 
+@pytest.mark.slow
 def test_a_well_determined_window_is_used_whatever_its_yaw_rate_spread():
     """Random rudder steps of at most 3 deg: a yaw-rate spread of 3-4 noise levels (the old rule
     wanted 5) still determines K and T1, so it gives estimates; a rudder within 0.2 deg does not,

@@ -8,6 +8,8 @@ import pytest
 from ship_ident.bench import benchmarks, peer_experiments, peers
 from ship_ident.bench.peer_rendering import OURS_LABEL
 
+pytestmark = pytest.mark.slow  # the peers benchmark's experiments run minutes of simulated data
+
 
 @pytest.fixture(scope="module")
 def accuracy():

@@ -154,6 +154,7 @@ glitch = st.tuples(
 @settings(
     max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
 )
+@pytest.mark.slow
 @given(st.lists(glitch, max_size=6))
 def test_glitched_trip_through_the_pipeline(trip, glitches):
     """Drops, duplicates, reorderings, NaN bursts, spikes and clock shifts over a real trip."""

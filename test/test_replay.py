@@ -31,6 +31,7 @@ def bag(tmp_path_factory):
     return path, sim.truth
 
 
+@pytest.mark.slow
 def test_replay_json_lines_recover_truth(bag):
     path, truth = bag
     result = replay(path, "--json")
@@ -46,6 +47,7 @@ def test_replay_json_lines_recover_truth(bag):
     assert final["window"]["end"] - final["window"]["start"] == pytest.approx(180.0, abs=0.5)
 
 
+@pytest.mark.slow
 def test_replay_out_mcap_reads_back_with_estimates(bag, tmp_path):
     path, truth = bag
     out = tmp_path / "identified.mcap"
@@ -85,6 +87,7 @@ def test_replay_out_mcap_reads_back_with_estimates(bag, tmp_path):
         (["{bag}", "--diagnosis-period", "2"], "diagnosis_period must be 0 (off) or >= refit_period"),
     ],
 )
+@pytest.mark.slow
 def test_replay_bad_input_is_one_line(bag, args, message):
     result = replay(*[a.format(bag=bag[0]) for a in args])
     assert result.returncode == 2
@@ -128,6 +131,7 @@ def estimates_in(path) -> list[dict]:
         return [json.loads(reader.deserialize(raw, c.msgtype).data) for c, _, raw in reader.messages(connections)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_interrupted_replay_leaves_a_readable_mcap_with_every_estimate(tmp_path, signum):
     out = tmp_path / "partial.mcap"
@@ -183,6 +187,7 @@ KVLCC2_ZIGZAG = (
 @pytest.mark.skipif(
     not KVLCC2_ZIGZAG.exists(), reason="kvlcc2_marin: measured MARIN model tests, not shipped with the package"
 )
+@pytest.mark.slow
 def test_kvlcc2_zigzag_uncertainty_covers_the_scatter_and_is_not_saturated():
     """The measured 20/20 zigzag of a slow ship: successive published K within 3 joint standard
     errors of each other (they were 12-19 apart), no rudder_saturated for the zigzag's +-20 deg,

@@ -10,6 +10,8 @@ from ship_ident.diagnose import diagnose
 from ship_ident.report import write_report
 from ship_ident.simulator import simulate
 
+pytestmark = pytest.mark.slow  # fits, diagnoses and renders a full report
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHECK = """<script>window.addEventListener('load', () => {
   const imgs = [...document.images];

@@ -13,6 +13,8 @@ from ship_ident.commands.play import Player
 from ship_ident.demo import Listener, shut_down, start_node
 from ship_ident.simulator import simulate
 
+pytestmark = pytest.mark.slow  # ten simulated minutes at 100 Hz through the node
+
 SIM_SECONDS = 600.0  # s of simulated time
 INPUT_RATE = 100.0  # Hz on each of rudder, heading, yaw rate
 PACE = 8.0  # x real time: 2400 data messages/s plus 800 /clock messages/s
@@ -25,7 +27,6 @@ def rss_mib(pid: int) -> float:
         return next(int(line.split()[1]) / 1024 for line in f if line.startswith("VmRSS"))
 
 
-@pytest.mark.slow
 def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: F811
     d = simulate("mixed", duration=SIM_SECONDS, seed=11, sample_time=1.0 / INPUT_RATE).dataset
     heading = np.mod(d.heading + np.pi, 2 * np.pi) - np.pi

@@ -10,6 +10,8 @@ from ship_ident.estimators import make_estimator
 from ship_ident.simulator import _EFFECT_TRUTH, Vessel, random_vessel, simulate
 from ship_ident.structure import Structure
 
+pytestmark = pytest.mark.slow  # random vessels through the online schedule
+
 STRUCTURE = Structure("nomoto2", ["rudder_offset", "cubic_yaw"])
 
 
@@ -65,7 +67,6 @@ def test_ship_configuration_follows_the_hull():
     assert vessels.config_for(random_vessel(np.random.default_rng(0), "usv")) == vessels.DEFAULTS
 
 
-@pytest.mark.slow
 def test_bench_vessels_fixed_seed_sample_against_the_truth():
     """Two USVs, quick runs (three windows): a steady one and one whose K falls 30 % mid-run."""
     cases = [vessels.run_case(seed, quick=True) for seed in (1007, 1000)]

@@ -270,7 +270,6 @@ def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id,
     assert [e["stamp"] for e in logged][-len(published) :] == [e["stamp"] for e in published]
 
 
-@pytest.mark.slow
 def test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added(env, domain_id, tmp_path):
     """A bag whose gyro reads 0.5 deg/s high, played at 5x to a node with a 90 s window diagnosed
     every 15 s: ~/diagnosis names gyro_bias within three periods after the window fills, with the

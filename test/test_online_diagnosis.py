@@ -83,6 +83,7 @@ def windows(sim, length, count, model_effects, step=None):
     ]
 
 
+@pytest.mark.slow
 def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     """The gyro reads high (named three times in a row: added); then the gyro is recalibrated and a
     wind rises: with gyro_bias in the model the held-out error does not fall in two diagnoses, so
@@ -116,6 +117,7 @@ def test_a_window_that_cannot_support_a_diagnosis_is_skipped_with_the_reason():
     assert no_speed["status"] == "skipped" and no_speed["reason"].startswith("fit failed: speed_dependence needs")
 
 
+@pytest.mark.slow
 def test_the_worker_diagnoses_in_a_child_process_one_at_a_time_within_its_cpu_budget():
     sim = simulate("random", effects=SEED_EFFECTS + ("gyro_bias",), duration=100.0, seed=3)
     worker = DiagnosisWorker()

@@ -94,6 +94,7 @@ def test_replay_bad_input_is_one_line(bag, args, message):
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_replay_diagnoses_the_trip_into_the_records_the_mcap_and_a_plot(bag, tmp_path):
     """Nothing hidden: every diagnosis in the record of its refit and on its own MCAP topics, the
     held-out error at the noise floor, no missing_effect; printed for people; the plot is written."""

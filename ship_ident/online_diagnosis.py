@@ -89,22 +89,20 @@ def diagnose_window(dataset: Dataset, model: str, effects: tuple, stamp: float) 
     ``done`` with the window's own verdict, candidates, held-out error and noise floor (rad/s),
     or ``skipped`` with the ``reason``. Never raises on bad data."""
     started = time.process_time()
-    record = skipped(stamp, model, effects, "")
-    record["window"] = {"start": float(dataset.time[0]), "end": float(dataset.time[-1])}
     reason = too_short(dataset) or excitation_shortfall(dataset)
+    record = skipped(stamp, model, effects, reason)
     if reason is None:
         try:
             result = diagnose(dataset, model, effects, workers=1)
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
-            reason = f"fit failed: {exc}"
+            record["reason"] = f"fit failed: {exc}"
         else:
             if "low_excitation" in result.estimate.flags:
-                reason = "too little excitation: the training part excites the yaw too little (low_excitation)"
+                record["reason"] = "too little excitation: the training part hardly excites the yaw (low_excitation)"
             else:
-                record.update(_done(result))
                 del record["reason"]
-    if reason is not None:
-        record["reason"] = reason
+                record.update(_done(result))
+    record["window"] = {"start": float(dataset.time[0]), "end": float(dataset.time[-1])}
     record["compute_seconds"] = time.process_time() - started
     return record
 

@@ -54,7 +54,7 @@ from .io import FLOAT64, IMU, Sample, imu_samples
 from .jsonio import dumps_json
 from .online import CONDITION_LEVELS, OnlineIdentifier
 from .online_config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
-from .online_diagnosis import DiagnosisWorker, OnlineDiagnosis
+from .online_diagnosis import MIN_WINDOW_S, DiagnosisWorker, OnlineDiagnosis
 
 NODE_NAME = "ship_ident"
 TICKS_PER_REFIT = 5  # the schedule is checked this many times per refit period
@@ -116,7 +116,11 @@ class IdentifierNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.diagnosis_pub = self.create_publisher(String, "~/diagnosis", 10)
         self.held_out_error_pub = self.create_publisher(Float64, "~/held_out_error", 10)
-        self.diagnosis = OnlineDiagnosis(DiagnosisWorker(), self.get_fully_qualified_name())
+        worker = DiagnosisWorker()
+        config = self.identifier.config
+        if config.diagnosis_period > 0 and config.window_length >= MIN_WINDOW_S:
+            worker.start()  # its imports run while the window fills
+        self.diagnosis = OnlineDiagnosis(worker, self.get_fully_qualified_name())
         self._auto_effects = None  # effects auto-add asked for, set from the executor thread
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="refit")
         self._running = None  # Future of the refit in progress
@@ -125,10 +129,9 @@ class IdentifierNode(Node):
         self._callback_errors = 0
         self._type_problems = ""  # sentence about wrong-type publishers on the inputs, if any
         self._timer = None
-        self._start_timer(self.identifier.config.refit_period)
+        self._start_timer(config.refit_period)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        config = self.identifier.config
         self.get_logger().info(
             f"identifying {config.structure().label()} with {config.method}: window "
             f"{config.window_length:g} s, refit every {config.refit_period:g} s"
@@ -297,9 +300,10 @@ class IdentifierNode(Node):
         if diagnosis["status"] == "done":
             self.held_out_error_pub.publish(Float64(data=float(diagnosis["held_out_error"])))
         auto_add = diagnosis.get("auto_add")
-        if auto_add:
-            log = self.get_logger().info if auto_add["action"] == "kept" else self.get_logger().warning
-            log(f"auto-add: {auto_add['sentence']}")
+        if auto_add and auto_add["action"] == "kept":  # one severity per call site (rclpy's rule)
+            self.get_logger().info(f"auto-add: {auto_add['sentence']}")
+        elif auto_add:
+            self.get_logger().warning(f"auto-add: {auto_add['sentence']}")
 
     def _publish_diagnostics(self, now: float, level: int, conditions: dict, values: dict) -> None:
         status = DiagnosticStatus(

@@ -172,8 +172,9 @@ def _serve(connection) -> None:
 class DiagnosisWorker:
     """Runs diagnoses in one child process at low priority (``NICENESS``), one at a time, so a
     refit never waits for one; a new diagnosis starts only when the last one's CPU time is at most
-    ``CPU_BUDGET`` of the time since it started. The child starts at the first diagnosis
-    (``spawn``: a fresh interpreter, never a fork of the ROS process and its threads)."""
+    ``CPU_BUDGET`` of the time since it started. The child starts with ``start`` (the node: at its
+    start, so that its imports run while the window fills) or at the first diagnosis (``spawn``: a
+    fresh interpreter, never a fork of the ROS process and its threads)."""
 
     def __init__(self):
         self._process = self._connection = None
@@ -191,7 +192,8 @@ class DiagnosisWorker:
             )
         return None
 
-    def submit(self, job: tuple) -> None:
+    def start(self) -> None:
+        """Start the child process now (its imports take seconds) unless it runs already."""
         if self._process is None or not self._process.is_alive():
             context = get_context("spawn")
             self._connection, child = context.Pipe()
@@ -199,6 +201,9 @@ class DiagnosisWorker:
             self._process.start()
             os.setpriority(os.PRIO_PROCESS, self._process.pid, NICENESS)  # before its imports, not after
             child.close()
+
+    def submit(self, job: tuple) -> None:
+        self.start()
         self._job = (job[3], job[1], job[2])
         self._connection.send(job)
 
@@ -269,6 +274,7 @@ class OnlineDiagnosis:
             self._model_changed(structure)
         self._in_force = structure
         now = record.time
+        finished = self.runner.poll()  # first: a diagnosis that just ended frees the runner for a due one
         if config.diagnosis_period > 0 and self._is_due(now, config.diagnosis_period):
             refusal = self.runner.refusal(now)
             if refusal is None:
@@ -280,9 +286,9 @@ class OnlineDiagnosis:
                     refusal = too_short(dataset)  # said here: no process started for it
                     if refusal is None:
                         self.runner.submit((dataset, config.model, tuple(config.effects), now))
-            if refusal is not None:
+                        finished = finished or self.runner.poll()  # inline: done at once
+            if refusal is not None and finished is None:  # (a finished one is the news of this refit)
                 record.diagnosis = skipped(now, config.model, config.effects, refusal)
-        finished = self.runner.poll()
         change = None
         if finished is not None:
             change = self.finish(finished, config)

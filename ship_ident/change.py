@@ -38,7 +38,7 @@ import numpy as np
 
 from .dataset import Dataset, cut_segments
 from .metrics import effective_sample_fraction
-from .signals import SENSOR_RESOLUTION, noise_level
+from .noise import SENSOR_RESOLUTION
 from .structure import Structure
 
 CONFIRMATIONS = 2  # refits in a row above the ratio before a change is declared
@@ -103,7 +103,7 @@ class ChangeDetector:
         )
         errors = block_errors(structure, params, dataset, blocks)
         if len(errors):
-            floor = max(noise_level(dataset.yaw_rate, 0.0) ** 2, MIN_LEVEL)
+            floor = max(dataset.noise_std("yaw_rate", 0.0) ** 2, MIN_LEVEL)
             self.references.append((float(dataset.time[-1]), params, max(float(np.median(errors)), floor)))
 
     def forget(self) -> None:

@@ -12,6 +12,8 @@ from functools import cached_property
 
 import numpy as np
 
+from .noise import SENSOR_RESOLUTION, noise_level
+
 
 class DataError(ValueError):
     """Input data that cannot be used; the message says what is wrong and what to do."""
@@ -64,6 +66,19 @@ class Dataset:
     @property
     def n_samples(self) -> int:
         return len(self.time)
+
+    def noise_std(self, name: str, floor: float = SENSOR_RESOLUTION) -> float:
+        """White-noise std of the measured ``name`` (``rudder`` or ``heading`` in rad, ``yaw_rate``
+        in rad/s), at least ``floor``; estimated once per dataset (``noise.noise_level``)."""
+        levels = self._noise_levels
+        if name not in levels:
+            levels[name] = noise_level(getattr(self, name), 0.0)
+        return max(levels[name], floor)
+
+    @cached_property
+    def _noise_levels(self) -> dict:
+        """Noise stds estimated so far, by signal name (filled by ``noise_std``)."""
+        return {}
 
     @cached_property
     def sample_time(self) -> float:

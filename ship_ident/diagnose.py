@@ -49,7 +49,7 @@ from .effects import EFFECTS, Evidence, StartContext, heading_harmonics
 from .estimators import Estimate, make_estimator, regression_method
 from .integrate import forcing as yaw_forcing
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
-from .signals import SENSOR_RESOLUTION, Signals, compute_signals, noise_level
+from .signals import Signals, compute_signals
 from .structure import Structure
 
 DEFAULT_METHOD = "rlssvm+oe"  # cheap start + output-error refinement: the fits dominate the run time
@@ -515,7 +515,7 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
     auto_out = float(np.mean(np.abs(auto[positive]) > bound))
     cross_out = float(np.mean(np.abs(cross) > bound))
     rms = float(np.sqrt(np.mean(residual**2))) if n else np.inf
-    noise = noise_yaw_rate if noise_yaw_rate else noise_level(held_out.yaw_rate, SENSOR_RESOLUTION)
+    noise = noise_yaw_rate if noise_yaw_rate else held_out.noise_std("yaw_rate")
     ratio = rms / noise if noise > 0 else np.inf
     at_noise = bool(ratio <= NOISE_MARGIN)
     return {
@@ -871,8 +871,8 @@ def diagnose(
         parts = [(training, recordings(training, "training"), False), (rest, recordings(rest, "held-out"), True)]
     worst = worst_segments(parts, structure, estimate.parameters, worst_window, before=before)
     noise = {
-        "heading": noise_level(dataset.heading, SENSOR_RESOLUTION),
-        "yaw_rate": noise_level(dataset.yaw_rate, SENSOR_RESOLUTION),
+        "heading": dataset.noise_std("heading"),
+        "yaw_rate": dataset.noise_std("yaw_rate"),
     }
     return Diagnosis(
         dataset=dataset,

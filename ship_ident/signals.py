@@ -28,6 +28,7 @@ from scipy.ndimage import median_filter
 from scipy.signal import savgol_filter
 
 from .dataset import DataError, Dataset
+from .noise import SENSOR_RESOLUTION, robust_std
 
 DIFFERENTIATION_METHODS = ("savgol", "rts")
 
@@ -82,27 +83,6 @@ def _rts_segment(psi, r, h, heading_noise, yaw_rate_noise, jerk_psd):
     return xs
 
 
-# The finest angle (rad) or turn rate (rad/s) a compass or rate gyro resolves: the floor under
-# every estimate of their noise.
-SENSOR_RESOLUTION = float(np.radians(0.01))
-MAD_TO_STD = 1.4826  # std of Gaussian noise / its median absolute deviation
-
-
-def robust_std(values: np.ndarray) -> float:
-    """MAD_TO_STD * median absolute deviation: the std of Gaussian noise, blind to a few outliers."""
-    return float(MAD_TO_STD * np.median(np.abs(values - np.median(values))))
-
-
-def noise_level(values: np.ndarray, floor: float) -> float:
-    """Std of white measurement noise: the (robust) residual of a local quadratic fit, corrected
-    for its smoothing."""
-    if len(values) < 15:
-        return floor
-    resid = values - savgol_filter(values, 11, 2)
-    # a quadratic over 11 points passes part of white noise; undo that loss of variance
-    return max(robust_std(resid) / np.sqrt(1 - 0.4126), floor)
-
-
 def despike(values: np.ndarray, floor: float, window: int = 7, threshold: float = 6.0) -> np.ndarray:
     """Hampel filter: samples more than ``threshold`` robust stds (at least ``floor``) from the
     running median of ``window`` samples are replaced by that median."""
@@ -133,8 +113,8 @@ def compute_signals(
     dataset.check_finite()
     h = dataset.sample_time
     n = dataset.n_samples
-    heading_noise = noise_level(dataset.heading, SENSOR_RESOLUTION)
-    yaw_rate_noise = noise_level(dataset.yaw_rate, SENSOR_RESOLUTION)
+    heading_noise = dataset.noise_std("heading")
+    yaw_rate_noise = dataset.noise_std("yaw_rate")
     window_s = smoothing_window(yaw_rate_noise) if window_s is None else window_s
     window = max(5, int(round(window_s / h)) | 1)
     edge = window // 2 + 1

@@ -17,7 +17,7 @@ import numpy as np
 from ..estimators import make_estimator
 from ..estimators.lssvm import lssvm_dual_with_bias
 from ..integrate import advance, initial_z
-from ..signals import SENSOR_RESOLUTION, compute_signals, noise_level
+from ..signals import compute_signals
 from ..structure import Structure
 
 STRUCTURE = Structure("nomoto2", ["rudder_offset", "cubic_yaw"])
@@ -109,8 +109,8 @@ class ParameterUKF:
         ukf.P = np.diag(np.concatenate([[1e-4, 1e-4, 1e-3], (0.2 * scale) ** 2]))
         ukf.R = np.diag(
             [
-                noise_level(dataset.heading, SENSOR_RESOLUTION) ** 2,
-                noise_level(dataset.yaw_rate, SENSOR_RESOLUTION) ** 2,
+                dataset.noise_std("heading") ** 2,
+                dataset.noise_std("yaw_rate") ** 2,
             ]
         )
         ukf.Q = np.diag(np.concatenate([[1e-8, 1e-7, 1e-7], (self.drift * scale) ** 2]))

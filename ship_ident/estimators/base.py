@@ -23,7 +23,7 @@ import numpy as np
 from ..dataset import DataError, Dataset
 from ..integrate import substeps_for
 from ..metrics import effective_sample_fraction, free_run_fit
-from ..signals import SENSOR_RESOLUTION, Signals, compute_signals, noise_level
+from ..signals import Signals, compute_signals
 from ..structure import Regression, Structure
 
 MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite the hull
@@ -84,9 +84,9 @@ def excitation(dataset: Dataset) -> dict:
     return {
         "rudder_std": float(np.std(dataset.rudder)),
         "yaw_rate_std": float(np.std(dataset.yaw_rate)),
-        "yaw_rate_std_needed": max(HARDLY_MOVES_SNR * noise_level(dataset.yaw_rate, 0.0), MIN_YAW_RATE_STD),
+        "yaw_rate_std_needed": max(HARDLY_MOVES_SNR * dataset.noise_std("yaw_rate", 0.0), MIN_YAW_RATE_STD),
         "heading_std": float(np.std(dataset.heading)),
-        "heading_std_needed": HARDLY_MOVES_SNR * noise_level(dataset.heading, SENSOR_RESOLUTION),
+        "heading_std_needed": HARDLY_MOVES_SNR * dataset.noise_std("heading"),
     }
 
 

@@ -52,7 +52,7 @@ from scipy import sparse
 from scipy.signal import convolve
 
 from ..dataset import Dataset, cut_segments
-from ..signals import SENSOR_RESOLUTION, noise_level, robust_std
+from ..noise import robust_std
 from ..structure import Structure
 from .base import Estimate, Estimator, finish_estimate, fit_substeps
 
@@ -270,8 +270,8 @@ class OutputError(Estimator):
         lower, upper = structure.bounds(names, dataset)
         params0 = structure.clip_to_bounds(first.parameters)
         h = dataset.sample_time
-        s_psi = noise_level(dataset.heading, SENSOR_RESOLUTION)
-        s_r = noise_level(dataset.yaw_rate, SENSOR_RESOLUTION)
+        s_psi = dataset.noise_std("heading")
+        s_r = dataset.noise_std("yaw_rate")
         intervals = self.intervals(dataset)
         shots = replace(dataset, segments=intervals)
         weigh = self.residual_weighting(structure, dataset, params0, s_psi, s_r, intervals)

@@ -39,7 +39,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..innovations import innovation_filter, noise_model
-from ..signals import noise_level
 from .output_error import OutputError
 
 
@@ -55,7 +54,7 @@ class PredictionError(OutputError):
         from .base import fit_substeps
 
         h = dataset.sample_time
-        s_delta = noise_level(dataset.rudder, np.radians(0.001))
+        s_delta = dataset.noise_std("rudder", np.radians(0.001))
         kalman = innovation_filter(
             noise_model(structure.order, params0, h, fit_substeps(h, params0), s_delta, s_psi, s_r)
         )

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..signals import robust_std
+from ..noise import robust_std
 from .base import RegressionEstimator, Solution, column_scales
 from .lssvm import ridge_primal
 

@@ -6,7 +6,7 @@ bundled 10-minute bag at 15x real time, listens to ``~/estimate`` and prints
 the parameters as they converge beside the truth the bag was simulated
 with. About a minute; Ctrl-C stops everything.
 
-The helpers here (``ros_environment``, ``start_node``, ``start_play``,
+The helpers here (``ros_environment``, ``start_node``, ``start_play``, ``quiet_trip``,
 ``stop``, ``Listener``) are also what the node tests use.
 """
 
@@ -66,6 +66,16 @@ def start_play(env: dict, bag, rate: float, *options: str, **popen) -> subproces
         *options,
     ]
     return subprocess.Popen(command, env=env, **popen)
+
+
+def quiet_trip(domain_id: int, log_dir, bag, rate: float, *parameters: str):
+    """A quiet ``identifier_node`` on simulated time (``use_sim_time`` and ``parameters``,
+    ``name:=value``), a ``Listener`` collecting its outputs and ``bag`` played to it at ``rate``:
+    ``(node, listener, play)``, to be ended with ``shut_down``."""
+    env = ros_environment(domain_id, log_dir)
+    node = start_node(env, "use_sim_time:=true", *parameters, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    listener = Listener(domain_id)
+    return node, listener, start_play(env, bag, rate, stderr=subprocess.DEVNULL)
 
 
 def stop(process: subprocess.Popen, timeout: float = 5.0):

@@ -67,3 +67,14 @@ def test_bench_speed_quick_json_is_one_object(capsys):
     assert result["benchmark"] == "speed"
     for method, times in result["median_seconds"].items():
         assert all(0 < t < 60 for t in times.values()), method
+
+
+def test_onboard_steady_quick_raises_no_missing_effect_over_dds():
+    """The real node over DDS, five minutes of a drawn USV with nothing hidden at 8x (the 30-minute
+    trips are ``bench onboard-steady``'s): its diagnoses run and none says missing_effect."""
+    result = benchmarks()["onboard-steady"].run(True, seed=7)
+    (row,) = result["rows"]
+    assert row["node_exit"] == 0 and row["last_stamp"] >= 280.0  # the trip was played to its end
+    assert row["diagnoses_done"] >= 4, row  # measured: 7 of 9 (a window of 120 s, every 30 s)
+    assert row["missing_effect"] == [] and row["missing_effect_warnings"] == 0
+    assert row["held_out_over_noise_median"] < 1.5  # measured 1.05

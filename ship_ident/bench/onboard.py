@@ -17,7 +17,6 @@ warm-up of one full window, for ``MEASURE_S``:
 from __future__ import annotations
 
 import os
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -60,19 +59,11 @@ def process_tree_cpu_seconds(pid: int) -> float:
 
 def measure(bag: Path, period: float, window: float, measure_s: float, domain_id: int, log_dir: str) -> dict:
     """One node run with ``diagnosis_period`` = ``period``: CPU share, refit times, diagnoses."""
-    from ..demo import Listener, ros_environment, shut_down, start_node, start_play
+    from ..demo import quiet_trip, shut_down
 
-    env = ros_environment(domain_id, log_dir)
-    node = start_node(
-        env,
-        "use_sim_time:=true",
-        f"diagnosis_period:={period}",
-        f"window_length:={window}",
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+    node, listener, play = quiet_trip(
+        domain_id, log_dir, bag, 1.0, f"diagnosis_period:={period}", f"window_length:={window}"
     )
-    listener = Listener(domain_id)
-    play = start_play(env, bag, 1.0, stderr=subprocess.DEVNULL)
     try:
         warm = window + 5.0
         if not listener.spin(warm + 60.0, lambda: listener.estimates and listener.estimates[-1]["stamp"] >= warm):

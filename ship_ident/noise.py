@@ -1,20 +1,20 @@
 """Sensor noise: the resolution floor, a robust spread, and the white-noise level of a sampled signal.
 
-Numpy and scipy only, so that ``Dataset`` can estimate (and keep) the noise of its own signals.
+Numpy only, so that ``Dataset`` can estimate (and keep) the noise of its own signals.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_coeffs
 
 # The finest angle (rad) or turn rate (rad/s) a compass or rate gyro resolves: the floor under
 # every estimate of their noise.
 SENSOR_RESOLUTION = float(np.radians(0.01))
 MAD_TO_STD = 1.4826  # std of Gaussian noise / its median absolute deviation
 
-# residual of a local quadratic fit over 11 samples, as one convolution kernel (symmetric)
-_QUADRATIC_RESIDUAL = -savgol_coeffs(11, 2)
+# residual of a local quadratic fit over 11 samples, as one convolution kernel (symmetric): the
+# sample less the Savitzky-Golay smoothing weights (267 - 15 k^2) / 1287, k = -5..5
+_QUADRATIC_RESIDUAL = -(267.0 - 15.0 * np.arange(-5, 6) ** 2) / 1287.0
 _QUADRATIC_RESIDUAL[5] += 1.0
 # The residual keeps 1 - 89/429 = 0.79 of white noise's variance (the kernel's squared sum); the
 # thresholds built on this level (excitation, diagnosis noise floors, change test) were set with

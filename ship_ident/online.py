@@ -85,6 +85,10 @@ FREE_RUN_TOLERANCE = 1.25  # a new estimate's free run may miss the window at mo
 GAIN_FITS = ((("K", "T", "T1"), 4.0), (("K",), 2.0))
 MIN_GAIN_SAMPLES = 20  # new samples needed for the gain refit after a change
 SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published uncertainty
+# A window is full when its resampled data span window_length within this many sample times: the
+# newest sample of each input may be a sample time old, the oldest a sample time inside the window,
+# and the grid's floor loses one more (with 1.5 a ship's window, sample time 0.37 s, never was).
+FULL_WINDOW_MARGIN = 3.0
 
 # Estimator flags that make an estimate unusable even with a good-looking fit: the closed-form
 # map gave a gain or time constant outside its physical range, the output-error search ended
@@ -386,7 +390,7 @@ class OnlineIdentifier:
             record.conditions["implausible_estimate"] = f"{distrust}; keeping the last good estimate"
             return
         self._publish(config, structure, estimate, published, dataset, record)
-        if dataset.duration >= config.window_length - 1.5 * config.sample_time:
+        if dataset.duration >= config.window_length - FULL_WINDOW_MARGIN * config.sample_time:
             self._change.calibrate(structure, estimate, dataset)  # a full window's model
         with self._lock:
             self._change_note = None

@@ -528,3 +528,15 @@ def test_a_changed_vessel_is_followed_within_10_s(maneuver):
     assert alarms and change < alarms[0] <= change + 10.0
     times, ks = k_trace(records)
     assert recovery_time(times, ks, change, sim.info["truth_after"]["K"]) <= 10.0
+
+
+def test_a_full_window_at_an_odd_sample_time_calibrates_the_change_test():
+    """61.3 s at 0.37 s: the resampled window spans 2-3 sample times less than window_length (its
+    newest sample a step old, the grid's floor); it is still full, and its estimates become the
+    change test's references (with a margin of 1.5 steps none did: a changed vessel went unseen)."""
+    config = OnlineConfig(window_length=61.3, sample_time=0.37, min_window_length=30.0)
+    sim = simulate("random", duration=135.0, sample_time=0.37, seed=1)
+    ident = OnlineIdentifier(config)
+    records = list(run_schedule(ident, stream(sim.dataset)))
+    assert sum(r.new_estimate for r in records) >= 15
+    assert len(ident._change.references) >= 5

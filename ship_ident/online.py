@@ -461,11 +461,12 @@ class OnlineIdentifier:
 
         It sits on a physical bound; or its free run misses this window more than the last good
         estimate's (FREE_RUN_TOLERANCE, mean squares over blocks of ``change_test_length``, each run
-        free from the measured state); or its
-        gain or main time constant jumps beyond JUMP_STANDARD_ERRORS joint standard errors from the
-        last good one, and neither does its free run over the newest ``change_test_length`` s beat
-        the last good one's CLEAR_IMPROVEMENT times (a changed vessel shows there first), nor does
-        the previous refit's held estimate agree with it."""
+        free from the measured state); or its gain or main time constant jumps beyond
+        JUMP_STANDARD_ERRORS joint standard errors from the last good one, and neither does its free
+        run over the newest ``change_test_length`` s beat the last good one's CLEAR_IMPROVEMENT times
+        (a changed vessel shows there first), nor does the previous refit's held estimate agree with
+        it. A last good estimate whose free run diverges on this window (a changed vessel can make it
+        unstable) is no yardstick: it blocks nothing."""
         on_bound = _on_bound(structure, estimate.parameters)
         if on_bound:
             return f"{on_bound}: the search ran to a physical limit, not to the vessel"
@@ -477,7 +478,7 @@ class OnlineIdentifier:
             float(np.mean(block_errors(structure, p, dataset, blocks)))
             for p in (estimate.parameters, last_good.parameters)
         )
-        if not new_error <= FREE_RUN_TOLERANCE * old_error:
+        if math.isfinite(old_error) and not new_error <= FREE_RUN_TOLERANCE * old_error:
             return (
                 f"its free run misses the window more than the last good estimate's (yaw-rate rms "
                 f"{math.degrees(math.sqrt(new_error)):.3f} vs {math.degrees(math.sqrt(old_error)):.3f} deg/s)"
@@ -489,7 +490,7 @@ class OnlineIdentifier:
         new_newest, old_newest = (
             float(block_errors(structure, p, dataset, newest)[0]) for p in (estimate.parameters, last_good.parameters)
         )
-        if old_newest >= CLEAR_IMPROVEMENT * new_newest:
+        if not old_newest < CLEAR_IMPROVEMENT * new_newest:  # NaN: the last good one diverges there
             return None
         candidate, self._candidate = self._candidate, estimate
         if (

@@ -540,3 +540,16 @@ def test_a_full_window_at_an_odd_sample_time_calibrates_the_change_test():
     records = list(run_schedule(ident, stream(sim.dataset)))
     assert sum(r.new_estimate for r in records) >= 15
     assert len(ident._change.references) >= 5
+
+
+def test_a_last_good_estimate_that_diverges_blocks_nothing(sim):
+    """A last good estimate whose free run runs away on the new window (a cubic damping far below
+    the stability limit of the turn rates seen) is no yardstick: a good new estimate replaces it."""
+    from ship_ident.estimators import make_estimator
+
+    config = OnlineConfig()
+    structure, window = config.structure(), sim.dataset.slice(0, 1800)
+    estimate = make_estimator(config.method).fit(structure, window)
+    runaway = replace(estimate, parameters=dict(estimate.parameters, alpha=-100.0 / np.max(window.yaw_rate) ** 2))
+    assert not np.all(np.isfinite(structure.simulate(runaway.parameters, window)[1]))
+    assert OnlineIdentifier(config)._distrust(config, structure, estimate, window, runaway) is None

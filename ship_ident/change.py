@@ -37,6 +37,7 @@ from dataclasses import replace
 import numpy as np
 
 from .dataset import Dataset, cut_segments
+from .estimators.base import scaled_inverse
 from .metrics import effective_sample_fraction
 from .noise import SENSOR_RESOLUTION
 from .structure import Structure
@@ -193,7 +194,7 @@ def fit_gain(
     error = r - dataset.yaw_rate
     variance = float(error @ error) / max(len(error) - len(names), 1) / effective_sample_fraction(error)
     try:
-        covariance = variance * np.linalg.inv(jacobian.T @ jacobian)
+        covariance = variance * scaled_inverse(jacobian.T @ jacobian)
         std = np.sqrt(np.clip(np.diag(covariance), 0, None))
     except np.linalg.LinAlgError:
         std = np.full(len(names), np.inf)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ship_ident.estimators import OutputError, make_estimator, method_names
+from ship_ident.estimators.base import scaled_inverse
 from ship_ident.estimators.lssvm import (
     OLS,
     lssvm_dual_bias_free,
@@ -178,3 +179,14 @@ def test_neutral_effect_start_simulates_as_the_model_without_the_effects(clean):
 def test_rwlssvm_needs_the_sample_time_of_the_rows(noisy):
     with pytest.raises(ValueError, match="sample time"):
         make_estimator("rwlssvm").solve(np.eye(3), np.ones(3))
+
+
+def test_standard_errors_keep_a_weak_direction_among_strong_ones():
+    """J'J with one column 1e-9 of the others (alpha's sensitivity beside a yaw-rate state's on a
+    slow ship): its inverse, scaled, matches the exact one, where a pseudo-inverse gives the weak
+    direction no variance at all."""
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(500, 4)) * np.array([1.0, 1.0, 1.0, 1e-9])
+    exact = np.linalg.inv(J.T @ J)
+    assert np.allclose(scaled_inverse(J.T @ J), exact, rtol=1e-6)
+    assert np.linalg.pinv(J.T @ J)[3, 3] < 1e-3 * exact[3, 3]

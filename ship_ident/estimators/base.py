@@ -214,6 +214,15 @@ class RegressionEstimator(Estimator):
         return finish_estimate(structure, dataset, self.name, structure.clip_to_bounds(params), std, flags, info)
 
 
+def scaled_inverse(normal: np.ndarray) -> np.ndarray:
+    """The inverse of a normal matrix J'J, inverted with its diagonal scaled to one (columns of
+    very different sizes, a yaw-rate state's and alpha's 1e-7 of it, would otherwise lose the
+    weak direction to rounding, and a pseudo-inverse would give it no error at all);
+    LinAlgError when it is singular."""
+    scale = np.sqrt(np.maximum(np.diag(normal), 1e-300))
+    return np.linalg.inv(normal / np.outer(scale, scale)) / np.outer(scale, scale)
+
+
 def column_scales(X: np.ndarray) -> np.ndarray:
     """RMS of each column of X (1 for an all-zero column): X / column_scales(X) has unit-RMS columns."""
     scale = np.sqrt(np.mean(X**2, axis=0))

@@ -54,7 +54,7 @@ from scipy.signal import convolve
 from ..dataset import Dataset, cut_segments
 from ..noise import robust_std
 from ..structure import Structure
-from .base import Estimate, Estimator, finish_estimate, fit_substeps
+from .base import Estimate, Estimator, finish_estimate, fit_substeps, scaled_inverse
 
 MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
@@ -145,7 +145,7 @@ def _dense(a) -> np.ndarray:
 
 def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> np.ndarray:
     """Heteroscedasticity-and-autocorrelation-consistent (Newey-West) standard errors of the
-    first ``p`` unknowns: bread (J'J)^-1, meat the Bartlett-weighted long-run covariance of
+    first ``p`` unknowns: bread (J'J)^-1 (``scaled_inverse``), meat the Bartlett-weighted long-run covariance of
     the per-sample scores J_k' f_k (heading and yaw-rate rows of one sample summed), lags up
     to ``bandwidth`` samples (one shooting interval: residuals of different intervals are
     nearly independent). Only the parameter rows of the bread are needed, so the long-run
@@ -153,7 +153,7 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     matrix of the Bartlett weights, W u one convolution (FFT for long lag windows), so the
     cost is linear in the samples. ``J`` may be a scipy sparse matrix."""
     try:
-        bread = np.linalg.pinv(_dense(J.T @ J))[:p]
+        bread = scaled_inverse(_dense(J.T @ J))[:p]
     except np.linalg.LinAlgError:
         return np.full(p, np.inf)
     projected = np.asarray(J @ bread.T)

@@ -41,7 +41,7 @@ from .input_checks import (
     value_rejection,
     window_truncation,
 )
-from .metrics import free_run_fit
+from .metrics import free_run_fit, noise_limited_correlation
 from .online_config import OnlineConfig
 from .samples import ROLES, Sample
 from .structure import Structure, StructureError
@@ -376,11 +376,14 @@ class OnlineIdentifier:
             record.conditions["too_little_excitation"] = f"{undetermined}; keeping the last good estimate"
             return
         correlation = estimate.fit.get("r_yaw_rate", math.nan)
+        best = noise_limited_correlation(dataset.yaw_rate, dataset.noise_std("yaw_rate"))
+        needed = config.min_fit_correlation * best
         at_bounds = [f for f in estimate.flags if f in POOR_FIT_FLAGS]
-        if not correlation >= config.min_fit_correlation or at_bounds:
+        if not correlation >= needed or at_bounds:
             record.conditions["poor_fit"] = (
-                f"free-run yaw-rate correlation {correlation:.2f} (needs >= "
-                f"{config.min_fit_correlation:g}){', ' + ', '.join(at_bounds) if at_bounds else ''}: "
+                f"free-run yaw-rate correlation {correlation:.2f} (needs >= {needed:.2f}, "
+                f"{config.min_fit_correlation:g} of the {best:.2f} its noise allows)"
+                f"{', ' + ', '.join(at_bounds) if at_bounds else ''}: "
                 "the model misses the motion; keeping the last good estimate"
             )
             return

@@ -187,7 +187,12 @@ class OnlineConfig:
         group=CHECKS,
     )
     min_fit_correlation: float = parameter(
-        0.8, "free-run yaw-rate correlation below which the fit is reported poor", "", (0.0, 1.0), group=CHECKS
+        0.8,
+        "free-run yaw-rate correlation below which the fit is reported poor, as a share of the best its noise "
+        "allows (sqrt(1 - noise^2 / variance) of the measured yaw rate)",
+        "",
+        (0.0, 1.0),
+        group=CHECKS,
     )
     stale_timeout: float = parameter(
         1.0, "time without a sample before an input is reported stale", "s", (0.01, 3600.0), group=CHECKS

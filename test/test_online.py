@@ -11,6 +11,7 @@ import pytest
 from ship_ident.change import variance_change_point
 from ship_ident.estimate_log import EstimateLog
 from ship_ident.io import Sample
+from ship_ident.metrics import noise_limited_correlation
 from ship_ident.online import OnlineIdentifier, run_schedule
 from ship_ident.online_config import ConfigError, OnlineConfig
 from ship_ident.simulator import Noise, random_vessel, simulate
@@ -553,3 +554,15 @@ def test_a_last_good_estimate_that_diverges_blocks_nothing(sim):
     runaway = replace(estimate, parameters=dict(estimate.parameters, alpha=-100.0 / np.max(window.yaw_rate) ** 2))
     assert not np.all(np.isfinite(structure.simulate(runaway.parameters, window)[1]))
     assert OnlineIdentifier(config)._distrust(config, structure, estimate, window, runaway) is None
+
+
+def test_fit_quality_is_judged_against_what_the_noise_allows():
+    """A perfect model's free run correlates with a yaw rate measured through white noise of std s
+    by sqrt(1 - s^2 / var): 0.77 for a yaw rate spreading 1.6 times its noise, so a slow ship's
+    right model is not a poor fit at 0.8."""
+    rng = np.random.default_rng(2)
+    truth = np.sin(np.linspace(0, 40, 4000)) * np.sqrt(3) * 0.01  # variance 1.5e-4 (rad/s)^2
+    measured = truth + rng.normal(0, 0.01, truth.size)  # total variance 2.5e-4: noise 0.01 rad/s
+    best = noise_limited_correlation(measured, 0.01)
+    assert best == pytest.approx(np.corrcoef(truth, measured)[0, 1], abs=0.01)
+    assert best == pytest.approx(np.sqrt(1 - 1 / 2.5), abs=0.01)

@@ -31,7 +31,7 @@ import numpy as np
 from .change import ChangeDetector, block_errors, covering_blocks, fit_gain
 from .dataset import DataError, Dataset, resample_series
 from .estimators import make_estimator
-from .estimators.base import Estimate, excitation_shortfall
+from .estimators.base import Estimate, excitation_shortfall, loose_parameters
 from .input_checks import (
     REJECTIONS,
     heading_plausibility,
@@ -63,6 +63,7 @@ CONDITION_LEVELS = {
     "clock_jump": WARN,
     "vessel_changed": WARN,
     "implausible_estimate": WARN,
+    "uncertain_estimate": WARN,
     "window_truncated": WARN,
     "heading_in_degrees": WARN,
     "yaw_rate_sign": WARN,
@@ -89,6 +90,15 @@ SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published unce
 # newest sample of each input may be a sample time old, the oldest a sample time inside the window,
 # and the grid's floor loses one more (with 1.5 a ship's window, sample time 0.37 s, never was).
 FULL_WINDOW_MARGIN = 3.0
+
+# Relative standard errors (published, std / |value|) within which a new estimate is trusted (status
+# OK): a 10 % error is then 3 (K) or 2 (T1) standard errors away. A looser one (within the
+# MAX_RELATIVE_ERRORS of estimators.base, 10 % and 30 %) is published as uncertain_estimate (WARN):
+# its parameters with their wide errors, not as an estimate to steer by (a hull whose rudder lead
+# T3 nearly cancels T1 determines K but hardly T1); after a change, one whose K is known worse than
+# the last good estimate's is not published (a K refitted on the first seconds of new data beats a
+# full fit of a straight leg).
+TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.05, "T1": 0.05}
 
 # Estimator flags that make an estimate unusable even with a good-looking fit: the closed-form
 # map gave a gain or time constant outside its physical range, the output-error search ended
@@ -392,6 +402,24 @@ class OnlineIdentifier:
         if distrust:
             record.conditions["implausible_estimate"] = f"{distrust}; keeping the last good estimate"
             return
+        loose, figures = loose_parameters(published.parameters, published.std_errors, TRUSTED_RELATIVE_ERRORS)
+        if loose:
+            held = (  # after a change, a K refitted on the new data is not replaced by a looser one
+                "K" in loose
+                and self._change_note is not None
+                and last_good is not None
+                and last_good.std_errors.get("K", math.inf) < published.std_errors["K"]
+            )
+            record.conditions["uncertain_estimate"] = (
+                f"the window determines {', '.join(loose)} only loosely ({figures}): "
+                + (
+                    "keeping the last good estimate, whose K is known better"
+                    if held
+                    else "published with its uncertainty, not to be trusted as OK"
+                )
+            )
+            if held:
+                return
         self._publish(config, structure, estimate, published, dataset, record)
         if dataset.duration >= config.window_length - FULL_WINDOW_MARGIN * config.sample_time:
             self._change.calibrate(structure, estimate, dataset)  # a full window's model

@@ -812,26 +812,23 @@ def diagnose(
         f"refitting with each of {len(fittable)} candidate effects ({', '.join(fittable)}) "
         f"on {min(workers, len(fittable))} processes"
     )
-    refits = dict(
-        zip(
-            fittable,
-            _map(
-                [
-                    (structure.with_effects(structure.effect_names + (n,)), training, method, estimate.parameters)
-                    for n in fittable
-                ],
-                workers,
-            ),
-        )
-    )
+
+    def refit_candidates(base: Estimate) -> dict:
+        tasks = [
+            (structure.with_effects(structure.effect_names + (n,)), training, method, base.parameters) for n in fittable
+        ]
+        return dict(zip(fittable, _map(tasks, workers)))
+
+    refits = refit_candidates(estimate)
     rebased = _rebase(structure, training, method, estimate, list(refits.values()))
     if rebased is not None:
         say(
             f"the candidates' fits found a better start for {structure.label()} itself: refitted "
             f"(training fit residual {estimate.info['cost_ratio']:.2f} -> {rebased.info['cost_ratio']:.2f} "
-            "noise levels)"
+            "noise levels); refitting the candidates from it"
         )
         estimate = rebased
+        refits = refit_candidates(estimate)  # each candidate extends the model it is judged against
         run = free_run(structure, estimate.parameters, held_out)
         context = residual_context(structure, estimate.parameters, dataset)
         evidences = {name: EFFECTS[name].evidence(context) for name in names}

@@ -2,7 +2,9 @@
 
 Each case draws a vessel with ``simulator.random_vessel`` (quick USVs to slow ships), a
 manoeuvre, and hides one effect of the catalogue, none, or a pair, at a strength that matters
-(``strength``: e.g. a delay of 20-50 % of T1, a rudder moment 25-45 % short at 35 deg). A case
+(``strength``, scaled by how the vessel answers that manoeuvre, ``response``: e.g. a delay of
+20-50 % of T1, yaw damping that takes 30-80 % off the turn rate it reaches, a rudder moment
+20-35 % short at the rudder it uses). A case
 is **fair** when an output-error fit of the true structure (started, as a candidate, from the
 diagnosed model with the effects neutral and from the effects' own starts) removes at least ``FAIR_SHARE`` of
 the held-out free-run error (the diagnosis's own windows): only fair cases are counted.
@@ -14,6 +16,8 @@ verdicts is the false alarm rate. Seeds are drawn fresh each run and printed.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -32,11 +36,29 @@ SAMPLE_TIME_S = {"usv": 0.1, "ship": 0.5}  # a slow ship's log needs no 10 Hz (K
 PAIR_SHARE = 0.15  # share of the cases that hide a pair
 
 
-def strength(effect: str, vessel, rng: np.random.Generator) -> dict:
-    """True parameters (SI) of ``effect`` at a strength that matters on ``vessel``: scaled by its
-    gain K, its time constant T1 and the turn rate r0 of 20 deg of rudder."""
+@dataclass(frozen=True)
+class Response:
+    """How the vessel answers the manoeuvre without any hidden effect: the 95th percentiles of its
+    turn rate |r| (rad/s) and rudder |delta| (rad). A slow ship on a zigzag never reaches its
+    steady turn K delta, so a damping drawn against K delta hid nothing that mattered."""
+
+    turn_rate: float
+    rudder: float
+
+
+def response(manoeuvre: str, vessel, duration: float, sample_time: float, seed: int) -> Response:
+    """The vessel's ``Response`` to ``manoeuvre``, simulated with nothing hidden."""
+    sim = simulate(manoeuvre, vessel, effects=(), duration=duration, sample_time=sample_time, seed=seed)
+    data = sim.dataset
+    return Response(float(np.percentile(np.abs(data.yaw_rate), 95)), float(np.percentile(np.abs(data.rudder), 95)))
+
+
+def strength(effect: str, vessel, rng: np.random.Generator, answer: Response) -> dict:
+    """True parameters (SI) of ``effect`` at a strength that matters on ``vessel`` in this manoeuvre:
+    the yaw damping forms scaled by the turn rate it reaches (``answer.turn_rate``), the stall by the
+    rudder it uses, the others by its gain K and time constant T1."""
     p = vessel.parameters
-    r0 = p["K"] * np.radians(20.0)
+    r0 = answer.turn_rate
     sign = rng.choice((-1.0, 1.0))
     if effect == "rudder_offset":
         return {"delta_r": sign * np.radians(rng.uniform(1.5, 3.0))}
@@ -61,8 +83,8 @@ def strength(effect: str, vessel, rng: np.random.Generator) -> dict:
         return {"n1": n1, "n3": -n1 / (rng.uniform(0.3, 0.5) * r0) ** 2}
     if effect == "quadratic_yaw":
         return {"d_q": rng.uniform(0.5, 1.0) / r0}
-    if effect == "rudder_stall":
-        return {"c_stall": rng.uniform(0.6, 0.85)}
+    if effect == "rudder_stall":  # the moment 20-35 % short at the rudder used, within the bound 0.9 1/rad^2
+        return {"c_stall": float(min(0.9, rng.uniform(0.2, 0.35) / answer.rudder**2))}
     raise ValueError(f"no strength for {effect!r}")
 
 
@@ -72,16 +94,18 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
     vessel = random_vessel(rng)
     kind = vessel.name.split("(")[0]
     manoeuvre = str(rng.choice(MANOEUVRES))
+    duration, sample_time = DURATION_S[kind], SAMPLE_TIME_S[kind]
+    answer = response(manoeuvre, vessel, duration, sample_time, seed)
     truth = {}
     for effect in hidden:
-        truth.update(strength(effect, vessel, rng))
+        truth.update(strength(effect, vessel, rng, answer))
     sim = simulate(
         manoeuvre,
         vessel,
         effects=hidden,
         parameters=truth,
-        duration=DURATION_S[kind],
-        sample_time=SAMPLE_TIME_S[kind],
+        duration=duration,
+        sample_time=sample_time,
         seed=seed,
     )
     result = diagnose(sim.dataset, "nomoto2", (), workers=1)
@@ -164,7 +188,8 @@ def render(result: dict) -> str:
     text = table(
         ["hidden", "fair cases", "named first", "named first and fixed"],
         rows,
-        f"hidden-effects, seed {result['seed']}: {result['cases']} cases, {result['fair']} fair",
+        f"hidden-effects, seed {result['seed']}: {result['cases']} cases, {result['fair']} fair "
+        f"({100 * result['fair'] / max(result['cases'] - result['none_cases'], 1):.0f} % of those hiding an effect)",
     )
     return (
         text + f"\n\nnamed first and fixed: {100 * result['named_first_and_fixed']:.0f} % of "

@@ -73,6 +73,8 @@ MUCH_WORSE = 0.25  # a candidate this much worse (heading or yaw rate) says why:
 EXTRAPOLATION_MARGIN = 0.1  # held-out beyond the training's 1-99 % range by this share of it
 SPEED_SPAN = 1.25  # speed exponents are fitted only when the training's 95th/5th speed
 # percentiles differ by this factor; else K ~ U, T ~ 1/U (n_K = n_T = 1)
+EQUIVALENT_MARGIN = 0.15  # a candidate within this improvement of the first, whose held-out yaw-rate
+# loss the first does not beat significantly (t < SIGNIFICANCE_T), is near-equivalent on these data
 PARSIMONY = 0.005  # ranking: each parameter of a candidate costs this share of improvement
 # (course_instability holds cubic_yaw: at equal gain the simpler ranks first)
 # the effect that frees a parameter pinned at a physical bound
@@ -123,6 +125,7 @@ class Candidate:
     note: str = ""
     extrapolation: str | None = None  # why a much worse candidate fails on the held-out data
     training_gain: float = 0.0  # share of the training free-run yaw-rate error it removes
+    near_equivalent: list[str] = field(default_factory=list)  # (the first) others the data cannot tell apart
 
     def to_json(self) -> dict:
         return {
@@ -141,6 +144,7 @@ class Candidate:
             "note": self.note,
             "extrapolation": self.extrapolation,
             "training_gain": self.training_gain,
+            "near_equivalent": self.near_equivalent,
         }
 
 
@@ -199,7 +203,7 @@ class Diagnosis:
             best = next(c for c in self.candidates if c.significant)
             return (
                 f"{best.effect} is missing: adding it removes {100 * best.improvement_yaw_rate:.0f} % "
-                "of the held-out yaw-rate error"
+                "of the held-out yaw-rate error" + equivalence_sentence(best)
             )
         if verdict == "adequate":
             return "the held-out error is the sensors' noise: nothing the catalogue knows is missing"
@@ -218,7 +222,8 @@ class Diagnosis:
         best = self.candidates[0] if self.candidates else None
         tail = (
             f"; no catalogued effect removes it (best: {best.effect}, "
-            f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant)"
+            f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant"
+            f"{equivalence_sentence(best)})"
             if best
             else "; no catalogued effect is left to try"
         )
@@ -757,6 +762,38 @@ def judge(
     )
 
 
+def equivalence_sentence(candidate: Candidate) -> str:
+    """What a sailor reads when the data cannot tell the first candidate from others ("" if they can)."""
+    if not candidate.near_equivalent:
+        return ""
+    return (
+        f"; near-equivalent on these data: {', '.join(candidate.near_equivalent)} (within "
+        f"{100 * EQUIVALENT_MARGIN:.0f} % and not significantly worse): another manoeuvre tells them apart"
+    )
+
+
+def mark_near_equivalents(candidates: list[Candidate], held_out: Dataset) -> None:
+    """Name in the first candidate the others the held-out data cannot tell from it: their improvement
+    within ``EQUIVALENT_MARGIN`` of the first's and at least ``MIN_IMPROVEMENT``, and the first's
+    yaw-rate loss not significantly lower (Diebold-Mariano t below ``SIGNIFICANCE_T``). A gyro
+    bias on a slow ship (60 % of the error) and a course instability (72 %) bend the same free runs:
+    the diagnosis names both rather than pretend the data chose."""
+    if not candidates or candidates[0].estimate is None:
+        return
+    first = candidates[0]
+    first_run = free_run(first.estimate.structure, first.estimate.parameters, held_out)
+    for c in candidates[1:]:
+        if (
+            c.estimate is None
+            or c.improvement < MIN_IMPROVEMENT
+            or first.improvement - c.improvement > EQUIVALENT_MARGIN
+        ):
+            continue
+        run = free_run(c.estimate.structure, c.estimate.parameters, held_out)
+        if loss_t_statistic(run.yaw_rate - held_out.yaw_rate, first_run.yaw_rate - held_out.yaw_rate) < SIGNIFICANCE_T:
+            first.near_equivalent.append(c.effect)
+
+
 def diagnose(
     dataset: Dataset,
     model: str = "nomoto2",
@@ -857,6 +894,7 @@ def diagnose(
                     "(low_excitation) to tell an effect from the model's own scatter"
                 )
     candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
+    mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
     tc = time_constant(estimate.parameters)
     worst_window = float(np.clip(WORST_WINDOW_TIME_CONSTANTS * tc, *WORST_WINDOW_LIMITS_S))

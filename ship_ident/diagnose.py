@@ -176,6 +176,7 @@ class Diagnosis:
     before: Estimate | None = None  # the model without the last listed effect (--effects)
     before_run: FreeRun | None = None
     evidences: dict = field(default_factory=dict)
+    training_windows: Dataset | None = None  # the training part cut into the held-out windows' length
 
     @property
     def structure(self) -> Structure:
@@ -663,6 +664,35 @@ def _rebase(structure: Structure, training: Dataset, method: str, estimate: Esti
     return refit if ratio < REBASE_GAIN * first and (ratio < REBASE_AT_NOISE or ratio < REBASE_BASIN * first) else None
 
 
+NOT_BETTER = "no_better_than_without"  # flag: every fit of the effect ran worse on the training data
+
+
+def no_worse(
+    refit: Estimate | str, training: Dataset, method: str, nested: dict, fitted_windows: Dataset
+) -> Estimate | str:
+    """A candidate never ends worse on the training data than the model without it (``nested``):
+    when its free runs on the training windows ``fitted_windows`` miss the yaw rate by more than
+    ``MIN_TRAINING_GAIN`` beyond the model's, it is refitted from the model with the effect
+    neutral alone (no effect starts), and when that is worse too, it is that neutral start. A
+    slow ship's rudder-delay profile once started the search at T1 = T2 = 0.01 s with a 4 s delay:
+    short shooting intervals fit it, free runs miss the yaw rate by 38 % more than without it."""
+    if isinstance(refit, str):
+        return refit
+    structure = refit.structure
+
+    def error(parameters: dict) -> float:
+        return free_run(structure, parameters, fitted_windows).fit["rmse_yaw_rate"]
+
+    start = dict(refit.parameters, **structure.neutral_effect_start(nested))  # fixed ones (U_ref) kept
+    base_error = error(start)
+    if error(refit.parameters) <= (1.0 + MIN_TRAINING_GAIN) * base_error:
+        return refit
+    plain = make_estimator(method).fit(structure, training, starts=(start,))
+    if error(plain.parameters) <= base_error:
+        return plain
+    return replace(refit, parameters=start, flags=[*refit.flags, NOT_BETTER])
+
+
 def _refit_task(args) -> Estimate | str:
     try:
         return _fit(*args)
@@ -738,6 +768,11 @@ def judge(
             evidence,
             note=f"not fitted: {refit}",
         )
+    note = (
+        "its fits ran worse on the training data than the model without it: shown at its neutral value"
+        if NOT_BETTER in refit.flags
+        else ""
+    )
     run = free_run(refit.structure, refit.parameters, held_out)
     imp_h = _improvement(base.fit["rmse_heading"], run.fit["rmse_heading"])
     imp_r = _improvement(base.fit["rmse_yaw_rate"], run.fit["rmse_yaw_rate"])
@@ -762,6 +797,7 @@ def judge(
         signal="heading" if imp_h >= imp_r else "yaw_rate",
         estimate=refit,
         fit=run.fit,
+        note=note,
         extrapolation=extrapolation(training, held_out) if worse else None,
         training_gain=float(training_gain),
     )
@@ -878,6 +914,7 @@ def diagnose(
         evidences = {name: EFFECTS[name].evidence(context) for name in names}
     fitted_windows = windows(training, window)
     fitted_run = free_run(structure, estimate.parameters, fitted_windows)
+    refits = {n: no_worse(r, training, method, estimate.parameters, fitted_windows) for n, r in refits.items()}
     candidates = [
         judge(
             n,
@@ -932,6 +969,7 @@ def diagnose(
         before=before,
         before_run=before_run,
         evidences=evidences,
+        training_windows=fitted_windows,
     )
 
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run
+from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run, no_worse
 from ..effects import EFFECTS
 from ..simulator import random_vessel, simulate
 from ..structure import Structure
@@ -122,7 +122,14 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
         "top_improvement": top.improvement,
     }
     if hidden:
-        true_fit = _fit(Structure("nomoto2", hidden), result.training, DEFAULT_METHOD, result.estimate.parameters)
+        base = result.estimate.parameters
+        true_fit = no_worse(
+            _fit(Structure("nomoto2", hidden), result.training, DEFAULT_METHOD, base),
+            result.training,
+            DEFAULT_METHOD,
+            base,
+            result.training_windows,
+        )
         true_run = free_run(true_fit.structure, true_fit.parameters, result.held_out)
         row["true_improvement"] = max(
             _improvement(result.run.fit["rmse_heading"], true_run.fit["rmse_heading"]),

@@ -62,14 +62,14 @@ def strength(effect: str, vessel, rng: np.random.Generator, answer: Response) ->
     p = vessel.parameters
     r0 = answer.turn_rate
     sign = rng.choice((-1.0, 1.0))
-    if effect == "rudder_offset":
-        return {"delta_r": sign * np.radians(rng.uniform(1.5, 3.0))}
+    if effect == "rudder_offset":  # a steady turn of 15-30 % of the turn rate reached, at most 10 deg
+        return {"delta_r": sign * min(rng.uniform(0.15, 0.3) * r0 / p["K"], np.radians(10.0))}
     if effect == "cubic_yaw":
         return {"alpha": rng.uniform(0.4, 0.8) / r0**2}
     if effect == "rudder_delay":
         return {"tau": float(min(5.0, rng.uniform(0.2, 0.5) * p["T1"]))}
     if effect == "wind_yaw":
-        amplitude, direction = p["K"] * np.radians(rng.uniform(2.0, 4.0)), rng.uniform(0, 2 * np.pi)
+        amplitude, direction = rng.uniform(0.15, 0.3) * r0, rng.uniform(0, 2 * np.pi)  # a turn rate (rad/s)
         return {
             "wind_c1": amplitude * np.cos(direction),
             "wind_s1": amplitude * np.sin(direction),

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run, no_worse
 from ..effects import EFFECTS
-from ..simulator import random_vessel, simulate
+from ..simulator import Noise, random_vessel, simulate
 from ..structure import Structure
 from . import progress, register
 from .common import table
@@ -57,27 +57,28 @@ def response(manoeuvre: str, vessel, duration: float, sample_time: float, seed: 
 
 def strength(effect: str, vessel, rng: np.random.Generator, answer: Response) -> dict:
     """True parameters (SI) of ``effect`` at a strength that matters on ``vessel`` in this manoeuvre:
-    the yaw damping forms scaled by the turn rate it reaches (``answer.turn_rate``), the stall by the
-    rudder it uses, the others by its gain K and time constant T1."""
+    the yaw damping forms, the rudder offset and the wind scaled by the turn rate it reaches
+    (``answer.turn_rate``), the stall by the rudder it uses, the delay by its time constant T1,
+    the gyro bias by the gyro's noise."""
     p = vessel.parameters
     r0 = answer.turn_rate
     sign = rng.choice((-1.0, 1.0))
-    if effect == "rudder_offset":  # a steady turn of 15-30 % of the turn rate reached, at most 10 deg
-        return {"delta_r": sign * min(rng.uniform(0.15, 0.3) * r0 / p["K"], np.radians(10.0))}
+    if effect == "rudder_offset":  # a steady turn of 20-40 % of the turn rate reached, at most 10 deg
+        return {"delta_r": sign * min(rng.uniform(0.2, 0.4) * r0 / p["K"], np.radians(10.0))}
     if effect == "cubic_yaw":
         return {"alpha": rng.uniform(0.4, 0.8) / r0**2}
     if effect == "rudder_delay":
         return {"tau": float(min(5.0, rng.uniform(0.2, 0.5) * p["T1"]))}
     if effect == "wind_yaw":
-        amplitude, direction = rng.uniform(0.15, 0.3) * r0, rng.uniform(0, 2 * np.pi)  # a turn rate (rad/s)
+        amplitude, direction = rng.uniform(0.2, 0.4) * r0, rng.uniform(0, 2 * np.pi)  # a turn rate (rad/s)
         return {
             "wind_c1": amplitude * np.cos(direction),
             "wind_s1": amplitude * np.sin(direction),
             "wind_c2": 0.3 * amplitude * np.sin(direction),
             "wind_s2": 0.0,
         }
-    if effect == "gyro_bias":
-        return {"r_bias": sign * np.radians(rng.uniform(0.3, 0.6))}
+    if effect == "gyro_bias":  # 2.5-5 times the gyro's noise: a bias within the noise removes little of the error
+        return {"r_bias": sign * rng.uniform(2.5, 5.0) * Noise().yaw_rate}
     if effect == "speed_dependence":
         return {"n_K": 1.0, "n_T": 1.0}
     if effect == "course_instability":

@@ -233,6 +233,9 @@ class CubicYaw(Effect):
         )
 
 
+DELAY_GRID_POINTS = 10  # rudder delays profiled before the local refinement
+
+
 class RudderDelay(Effect):
     name = "rudder_delay"
     explanation = (
@@ -245,16 +248,21 @@ class RudderDelay(Effect):
         return np.interp(time - p["tau"], time, rudder)
 
     def starts(self, context):
-        """Profile the dead time over a grid (0.25 s to the 5 s bound): at each delay the model
-        without it is refitted by regression on the delayed rudder. A delay of a few seconds
+        """Profile the dead time over a grid relative to the vessel and the log: ``DELAY_GRID_POINTS``
+        delays spaced geometrically from two sample times (or 5 % of the yaw time constant T1 + T2,
+        whichever is longer) up to that time constant (at most the 5 s bound); at each delay the
+        model without it is refitted by regression on the delayed rudder. A delay of a few seconds
         otherwise hides in T2 and T3 (a lag looks like a slow second pole), and the search from
         tau = 0 stays there."""
-        data = context.training
-        grid = [tau for tau in (0.25, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0) if tau >= 2 * data.sample_time]
+        data, nested = context.training, context.nested
+        upper = self.parameters[0].upper
+        time_constant = nested.get("T", nested.get("T1", 1.0) + nested.get("T2", 0.0))
+        shortest = min(max(2.0 * data.sample_time, 0.05 * time_constant), upper)
+        longest = float(np.clip(time_constant, shortest, upper))
         out = []
-        for tau in grid:
+        for tau in np.geomspace(shortest, longest, DELAY_GRID_POINTS):
             delayed = replace(data, rudder=self.effective_rudder(data.time, data.rudder, {"tau": tau}))
-            out.append(dict(context.refit(delayed), tau=tau))
+            out.append(dict(context.refit(delayed), tau=float(tau)))
         return out
 
     def evidence(self, context):

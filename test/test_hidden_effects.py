@@ -51,3 +51,23 @@ def test_a_long_rudder_delay_on_a_quick_boat_is_found():
     assert top.effect == "rudder_delay" and top.significant and result.verdict == "missing_effect"
     assert top.improvement_yaw_rate > 0.7  # measured: 79 %
     assert top.estimate.parameters["tau"] == pytest.approx(1.869, rel=0.1)
+
+
+def test_a_gyro_bias_on_a_slow_ship_is_judged_against_the_refitted_model():
+    """A slow ship (T1 = 68 s) with a 0.43 deg/s gyro bias: the first fit stops at T1 = T2 = 1.4 s,
+    34 noise levels, and every candidate "removed" 60-72 % by escaping that minimum
+    (course_instability first). Refitted from the candidates' starts (1.6 noise levels), with the
+    candidates refitted from it, gyro_bias alone is significant."""
+    row = run_case(828086076, ("gyro_bias",))
+    print(row)
+    assert row["fair"] and row["named_first_alone"] and row["fixed"]
+    assert row["verdict"] == "missing_effect"
+
+
+def test_a_long_rudder_delay_on_a_slow_ship_is_found():
+    """A 4.3 s dead time on a ship with T1 = 16.9 s and T3 = 8.6 s (20/20 zigzag): the model is
+    rebased, and the delay's candidate, refitted from the rebased model (not the first minimum),
+    removes most of the held-out heading error (measured: 61 %, before: 5 % worse)."""
+    row = run_case(795728401, ("rudder_delay",))
+    print(row)
+    assert row["named_first_alone"] and row["top_improvement"] > 0.5

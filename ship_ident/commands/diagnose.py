@@ -134,6 +134,8 @@ def format_diagnosis(result, source, options: str = "") -> str:
         lines.append(f"      {c.evidence.sentence}")
         if c.extrapolation:
             lines.append(f"      much worse held out: {c.extrapolation}")
+        if c.near_equivalent:
+            lines.append(f"      near-equivalent on these data: {', '.join(c.near_equivalent)}")
     if result.verdict == "missing_effect":
         top = result.candidates[0].effect
         effects = ",".join(result.structure.effect_names + (top,))

@@ -11,13 +11,14 @@ from test_node import domain_id, env  # noqa: F401  (fixtures)
 
 from ship_ident.commands.play import Player
 from ship_ident.demo import Listener, shut_down, start_node
+from ship_ident.node import TICKS_PER_REFIT
 from ship_ident.simulator import simulate
 
 pytestmark = pytest.mark.slow  # ten simulated minutes at 100 Hz through the node
 
 SIM_SECONDS = 600.0  # s of simulated time
 INPUT_RATE = 100.0  # Hz on each of rudder, heading, yaw rate
-PACE = 8.0  # x real time: 2400 data messages/s plus 800 /clock messages/s
+PACE = 6.0  # x real time: 1800 data messages/s plus 600 /clock messages/s
 WARM_UP = 250.0  # s of simulated time: window full, compiled code loaded
 REFIT_PERIOD = 5.0  # s
 
@@ -30,8 +31,8 @@ def rss_mib(pid: int) -> float:
 def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: F811
     d = simulate("mixed", duration=SIM_SECONDS, seed=11, sample_time=1.0 / INPUT_RATE).dataset
     heading = np.mod(d.heading + np.pi, 2 * np.pi) - np.pi
-    # diagnosis off: the soak measures the input path at 8x real time, where a diagnosis of the window
-    # every 60 s of simulated time would come every 7.5 s; its cost at real time is `bench onboard`'s
+    # diagnosis off: the soak measures the input path at 6x real time, where a diagnosis of the window
+    # every 60 s of simulated time would come every 10 s; its cost at real time is `bench onboard`'s
     node = start_node(
         env, "use_sim_time:=true", "diagnosis_period:=0.0", stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )
@@ -82,7 +83,8 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
         "refits": len(records),
         "new_estimates": int(len(latency)),
         "overran": overran,
-        "period_kept_share": float(np.mean(np.isclose(intervals, REFIT_PERIOD, atol=0.1))),
+        # the timer ticks TICKS_PER_REFIT times per period: a refit one tick late still keeps the schedule
+        "period_kept_share": float(np.mean(np.abs(intervals - REFIT_PERIOD) <= REFIT_PERIOD / TICKS_PER_REFIT + 0.05)),
         "refit_ms_p50_p95_p99_max": [round(1000 * v, 1) for v in np.percentile(latency, [50, 95, 99, 100])],
     }
     print("\nsoak figures:", figures)

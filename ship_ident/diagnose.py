@@ -915,11 +915,8 @@ def diagnose(
     before = fits[-2] if len(fits) > 1 and isinstance(fits[-2], Estimate) else None
     window = held_out_window(estimate.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
     held_out = windows(rest, window)
-    run = free_run(structure, estimate.parameters, held_out)
     before_run = free_run(before.structure, before.parameters, held_out) if before else None
-    context = residual_context(structure, estimate.parameters, dataset)
     names = [name for name in EFFECTS if name not in structure.effect_names]
-    evidences = {name: EFFECTS[name].evidence(context) for name in names}
     speed_varies = dataset.speed is not None and np.std(dataset.speed) > MIN_SPEED_VARIATION * abs(
         np.mean(dataset.speed)
     )
@@ -945,9 +942,6 @@ def diagnose(
         )
         estimate = rebased
         refits = refit_candidates(estimate)  # each candidate extends the model it is judged against
-        run = free_run(structure, estimate.parameters, held_out)
-        context = residual_context(structure, estimate.parameters, dataset)
-        evidences = {name: EFFECTS[name].evidence(context) for name in names}
     fitted_windows = windows(training, window)
     fitted_run = free_run(structure, estimate.parameters, fitted_windows)
     equivalent = _equivalent_base(structure, training, method, refits.values(), fitted_windows, fitted_run)
@@ -958,10 +952,11 @@ def diagnose(
         )
         estimate = equivalent
         refits = refit_candidates(estimate)
-        run = free_run(structure, estimate.parameters, held_out)
-        context = residual_context(structure, estimate.parameters, dataset)
-        evidences = {name: EFFECTS[name].evidence(context) for name in names}
         fitted_run = free_run(structure, estimate.parameters, fitted_windows)
+    # the model the candidates are judged against is settled: its held-out run and residual evidence
+    run = free_run(structure, estimate.parameters, held_out)
+    context = residual_context(structure, estimate.parameters, dataset)
+    evidences = {name: EFFECTS[name].evidence(context) for name in names}
     refits = {n: no_worse(r, training, method, estimate.parameters, fitted_windows) for n, r in refits.items()}
     candidates = [
         judge(

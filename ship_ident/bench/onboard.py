@@ -57,6 +57,22 @@ def process_tree_cpu_seconds(pid: int) -> float:
     return ticks / os.sysconf("SC_CLK_TCK")
 
 
+DEFAULT_EFFECTS = ("rudder_offset", "cubic_yaw")  # the node's default model: nothing hidden from it
+
+
+def drawn_trip(rng: np.random.Generator, duration: float, folder: str, k: int) -> tuple:
+    """A USV drawn with ``random_vessel`` (then a trip seed, from ``rng``), its random-step trip of
+    ``duration`` s with the node's default effects written to ``folder/trip{k}.mcap``: (vessel, bag)."""
+    from ..io import write_simulation
+
+    vessel = random_vessel(rng, "usv")
+    trip_seed = int(rng.integers(2**31))
+    sim = simulate("random", vessel, effects=DEFAULT_EFFECTS, duration=duration, seed=trip_seed)
+    bag = Path(folder) / f"trip{k}.mcap"
+    write_simulation(sim, bag, "mcap")
+    return vessel, bag
+
+
 def measure(bag: Path, period: float, window: float, measure_s: float, domain_id: int, log_dir: str) -> dict:
     """One node run with ``diagnosis_period`` = ``period``: CPU share, refit times, diagnoses."""
     from ..demo import quiet_trip, shut_down
@@ -91,8 +107,6 @@ def measure(bag: Path, period: float, window: float, measure_s: float, domain_id
 
 
 def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
-    from ..io import write_simulation
-
     rng = np.random.default_rng(seed)
     window = QUICK["window_length"] if quick else OnlineConfig().window_length
     measure_s = QUICK["measure"] if quick else MEASURE_S
@@ -101,11 +115,7 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(count or 1):
-            vessel = random_vessel(rng, "usv")
-            trip_seed = int(rng.integers(2**31))
-            sim = simulate("random", vessel, effects=("rudder_offset", "cubic_yaw"), duration=duration, seed=trip_seed)
-            bag = Path(tmp) / f"trip{k}.mcap"
-            write_simulation(sim, bag, "mcap")
+            vessel, bag = drawn_trip(rng, duration, tmp, k)
             for mode, period in modes.items():
                 progress(f"onboard: {vessel.name}, diagnosis {mode}: {window:g} s warm-up, {measure_s:g} s measured")
                 domain_id = 101 + (seed + len(rows)) % 45  # apart from the tests' domains 1..100 and 150..199

@@ -19,11 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from ..online_config import OnlineConfig
-from ..simulator import random_vessel, simulate
 from . import progress, register
 from .common import table
+from .onboard import drawn_trip
 
-MODEL_EFFECTS = ("rudder_offset", "cubic_yaw")  # the node's default effects: the truth's
 MINUTES = 30.0  # of simulated trip per vessel
 PACE = 4.0  # x real time: 30 minutes in 7.5 minutes of wall time
 QUICK = {"minutes": 5.0, "pace": 8.0, "window_length": 120.0, "diagnosis_period": 30.0}
@@ -63,8 +62,6 @@ def diagnose_trip(bag: Path, duration: float, pace: float, window: float, period
 
 
 def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
-    from ..io import write_simulation
-
     rng = np.random.default_rng(seed)
     settings = QUICK if quick else {"minutes": MINUTES, "pace": PACE}
     defaults = OnlineConfig()
@@ -74,11 +71,7 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(count or 1):
-            vessel = random_vessel(rng, "usv")
-            trip_seed = int(rng.integers(2**31))
-            sim = simulate("random", vessel, effects=MODEL_EFFECTS, duration=duration, seed=trip_seed)
-            bag = Path(tmp) / f"trip{k}.mcap"
-            write_simulation(sim, bag, "mcap")
+            vessel, bag = drawn_trip(rng, duration, tmp, k)
             progress(
                 f"onboard-steady: {vessel.name}: {settings['minutes']:g} min at {settings['pace']:g}x, "
                 f"window {window:g} s, diagnosis every {period:g} s"

@@ -24,8 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import median_filter
-from scipy.signal import savgol_filter
 
 from .dataset import DataError, Dataset
 from .noise import SENSOR_RESOLUTION, robust_std
@@ -57,6 +55,8 @@ class Signals:
 
 
 def _savgol(values: np.ndarray, window: int, h: float, deriv: int) -> np.ndarray:
+    from scipy.signal import savgol_filter  # here: scipy.signal takes seconds to import
+
     if len(values) < window:
         window = len(values) if len(values) % 2 else len(values) - 1
     poly = min(4, window - 1)
@@ -86,6 +86,8 @@ def _rts_segment(psi, r, h, heading_noise, yaw_rate_noise, jerk_psd):
 def despike(values: np.ndarray, floor: float, window: int = 7, threshold: float = 6.0) -> np.ndarray:
     """Hampel filter: samples more than ``threshold`` robust stds (at least ``floor``) from the
     running median of ``window`` samples are replaced by that median."""
+    from scipy.ndimage import median_filter
+
     if len(values) < window:
         return values
     median = median_filter(values, size=window, mode="nearest")

@@ -49,7 +49,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import sparse
-from scipy.signal import convolve
 
 from ..dataset import Dataset, cut_segments
 from ..noise import robust_std
@@ -152,6 +151,8 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     covariance is taken of the p-dimensional projected scores: u' W u with W the Toeplitz
     matrix of the Bartlett weights, W u one convolution (FFT for long lag windows), so the
     cost is linear in the samples. ``J`` may be a scipy sparse matrix."""
+    from scipy.signal import convolve  # here: scipy.signal takes seconds to import
+
     try:
         bread = scaled_inverse(_dense(J.T @ J))[:p]
     except np.linalg.LinAlgError:

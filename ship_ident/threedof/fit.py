@@ -6,7 +6,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from ..estimators.lssvm import OLS
 from ..estimators.tlssvm import TLSSVM, TRUNCATION_RULES
@@ -31,6 +30,8 @@ class Smoothed:
 
 def smooth(record: Record, window_time: float, trim: bool = True) -> Smoothed:
     """Cubic Savitzky-Golay fit over ``window_time`` (s); rows within half a window of the ends dropped."""
+    from scipy.signal import savgol_filter  # here: scipy.signal takes seconds to import
+
     h = record.sample_time
     window = max(5, int(round(window_time / h)) | 1)
     window = min(window, len(record) - (1 - len(record) % 2))

@@ -221,13 +221,21 @@ class Diagnosis:
         if "low_excitation" in self.estimate.flags:
             parts.append("the training data excite the yaw too little (low_excitation) to credit any effect")
         best = self.candidates[0] if self.candidates else None
-        tail = (
-            f"; no catalogued effect removes it (best: {best.effect}, "
-            f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant"
-            f"{equivalence_sentence(best)})"
-            if best
-            else "; no catalogued effect is left to try"
-        )
+        if best is None:
+            tail = "; no catalogued effect is left to try"
+        elif best.improvement >= MIN_IMPROVEMENT:  # it helps, but the held-out data cannot prove it
+            tail = (
+                f"; no catalogued effect removes it significantly (best: {best.effect} removes "
+                f"{100 * best.improvement_heading:.0f} % of the heading and {100 * best.improvement_yaw_rate:.0f} % "
+                f"of the yaw-rate error, t {best.t_statistic:.1f} < {SIGNIFICANCE_T:g}: more held-out data, "
+                f"or another manoeuvre, would tell{equivalence_sentence(best)})"
+            )
+        else:
+            tail = (
+                f"; no catalogued effect removes it (best: {best.effect}, "
+                f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant"
+                f"{equivalence_sentence(best)})"
+            )
         return "; ".join(parts) + tail
 
     def to_json(self) -> dict:

@@ -62,10 +62,42 @@ def test_validation_on_another_manoeuvre_finds_the_hidden_effect():
     assert result.verdict == "missing_effect" and result.candidates[0].effect == "wind_yaw"
 
 
-def test_nothing_hidden_is_adequate():
-    result = diagnose(_data(()), "nomoto2", (), workers=1)
+@pytest.fixture(scope="module")
+def nothing_hidden():
+    return diagnose(_data(()), "nomoto2", (), workers=1)
+
+
+def test_nothing_hidden_is_adequate(nothing_hidden):
+    result = nothing_hidden
     assert result.verdict == "adequate", [(c.effect, c.improvement, c.t_statistic) for c in result.candidates]
     assert result.residual_tests["cross_correlation_outside"] < 0.2
+
+
+def test_an_unproven_candidate_that_helps_is_not_called_useless(nothing_hidden):
+    """Structure left, and the best candidate removes most of the heading error without passing the
+    yaw-rate test (a slow ship's rudder offset on a short held-out log): the sentence gives its
+    figures and what would decide, instead of "no catalogued effect removes it"."""
+    best = replace(
+        nothing_hidden.candidates[0],
+        effect="rudder_offset",
+        improvement=0.9,
+        improvement_heading=0.9,
+        improvement_yaw_rate=0.44,
+        t_statistic=2.1,
+        significant=False,
+        near_equivalent=[],
+    )
+    tests = dict(nothing_hidden.residual_tests, white=False)
+    result = replace(nothing_hidden, candidates=[best], residual_tests=tests)
+    assert result.verdict == "unexplained"
+    assert result.verdict_sentence.endswith(
+        "no catalogued effect removes it significantly (best: rudder_offset removes 90 % of the heading and "
+        "44 % of the yaw-rate error, t 2.1 < 3: more held-out data, or another manoeuvre, would tell)"
+    ), result.verdict_sentence
+    useless = replace(best, improvement=0.05, improvement_heading=0.05, improvement_yaw_rate=0.02)
+    assert "no catalogued effect removes it (best: rudder_offset, 2 % of the yaw-rate error, not significant)" in (
+        replace(result, candidates=[useless]).verdict_sentence
+    )
 
 
 @pytest.mark.slow

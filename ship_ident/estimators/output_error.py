@@ -200,12 +200,15 @@ class OutputError(Estimator):
         whichever simulates closest to the data. Without ``starts``, a model with effects also
         starts from the regression fit of the bare model with the effects at their neutral values
         (an effect's regression column can make the regression start course-unstable: KVLCC2 with
-        cubic_yaw, T < 0); given starts take its place (they come from such models already)."""
+        cubic_yaw, T < 0); given starts take its place (they come from such models already). Without
+        ``starts`` the search also explores (``_refine``): a given start is a converged estimate of a
+        nearby window, and the online refit stays as quick as it was."""
         first = self.start.fit(structure, dataset)
+        explore = not starts
         if not starts and structure.effects:
             bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
             starts = (structure.neutral_effect_start(bare),)
-        return self._refine(structure, dataset, first, tuple(starts))
+        return self._refine(structure, dataset, first, tuple(starts), explore)
 
     def intervals(self, dataset: Dataset) -> tuple:
         """Shooting intervals: each restarts the free run from its own estimated state."""
@@ -224,10 +227,10 @@ class OutputError(Estimator):
         return max(b - a for a, b in intervals)
 
     @staticmethod
-    def _starts(structure: Structure, names: list, x0: np.ndarray, params0: dict) -> list:
+    def _starts(structure: Structure, names: list, x0: np.ndarray, params0: dict, explore: bool = True) -> list:
         """The regression's start, a conservative one (effects at their neutral values, T2 and T3
-        small), since a noisy regression can start the simulation unstable, and the conservative
-        one with its main time constant at each of TIME_CONSTANT_STARTS (T2 a tenth of it): a
+        small), since a noisy regression can start the simulation unstable, and (``explore``) the
+        conservative one with its main time constant at each of TIME_CONSTANT_STARTS (T2 a tenth of it): a
         regression on a yaw rate buried in its noise can miss the time scale altogether (a slow
         ship's T1 of 15 s came out at its 0.01 s floor, and every search from there stayed in
         that basin)."""
@@ -243,7 +246,7 @@ class OutputError(Estimator):
                 conservative[i] = structure.parameter(name).initial
         time_scales = []
         main = "T1" if "T1" in names else "T" if "T" in names else None
-        for value in TIME_CONSTANT_STARTS if main else ():
+        for value in TIME_CONSTANT_STARTS if main and explore else ():
             scaled = conservative.copy()
             scaled[names.index(main)] = value
             if "T2" in names:
@@ -280,9 +283,13 @@ class OutputError(Estimator):
             out.append(valley)
         return out
 
-    def _refine(self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple) -> Estimate:
+    def _refine(
+        self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple, explore: bool = True
+    ) -> Estimate:
         """Minimise the free-run error from ``first`` (the regression fit, and its conservative
-        variant) or from any of ``starts``, whichever simulates closest to the data."""
+        variant) or from any of ``starts``, whichever simulates closest to the data; ``explore``:
+        also from a range of time constants, every start's gain, rudder offset and states polished
+        first (a cold fit; a warm one, from an estimate of a nearby window, needs neither)."""
         names = structure.free_names
         p = len(names)
         lower, upper = structure.bounds(names, dataset)
@@ -359,7 +366,7 @@ class OutputError(Estimator):
 
         lo = np.concatenate([lower, np.full(states0.size, -np.inf)])
         hi = np.concatenate([upper, np.full(states0.size, np.inf)])
-        guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0) + [
+        guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0, explore) + [
             np.array([structure.clip_to_bounds(dict(params0, **s))[n] for n in names]) for s in starts
         ]
         points = [np.clip(np.concatenate([g, states0.ravel()]), lo, hi) for g in guesses]
@@ -391,7 +398,8 @@ class OutputError(Estimator):
                 x, f = moved, f_moved
             return x
 
-        points = [polished(x, weighting) for x, (weighting, _) in zip(points, weighings)]
+        if explore:
+            points = [polished(x, weighting) for x, (weighting, _) in zip(points, weighings)]
         costs = np.sum(residuals(points, substeps, [w for w, _ in weighings]) ** 2, axis=1)
         best = int(np.argmin(costs + dataset.n_samples * np.array([d for _, d in weighings])))
         x0, weigh = points[best], weighings[best][0]

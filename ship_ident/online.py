@@ -105,6 +105,7 @@ TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.05, "T1": 0.05}
 # with the gain or the main time constant on a bound (no hull has K = 100 1/s), or it stopped
 # before it converged.
 STUCK_FLAGS = ("at_bound:K", "at_bound:T", "at_bound:T1")  # a warm start that ends here is refitted cold
+RETRY_COLD_FLAGS = STUCK_FLAGS + ("oe_not_converged",)  # ... and one whose search did not converge
 POOR_FIT_FLAGS = (
     "complex_time_constants",
     "K_out_of_bounds",
@@ -364,10 +365,12 @@ class OnlineIdentifier:
             estimate = None
             if last_good is not None and last_good.ok and last_good.method == config.method:
                 estimate = estimator.fit(structure, dataset, starts=(last_good.parameters,))  # warm start
-                if any(f in STUCK_FLAGS for f in estimate.flags):
-                    estimate = None  # the vessel changed beyond the warm start's reach: fit afresh
-            if estimate is None:
-                estimate = estimator.fit(structure, dataset)
+            if estimate is None or any(f in RETRY_COLD_FLAGS for f in estimate.flags):
+                # none, or the vessel changed beyond the warm start's reach, or the search crawled
+                # along a valley from it: fit afresh (exploring time scales), keep the better search
+                cold = estimator.fit(structure, dataset)
+                if estimate is None or _better_search(cold, estimate):
+                    estimate = cold
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record.conditions["refit_failed"] = f"{type(exc).__name__}: {exc}"
             return
@@ -592,6 +595,19 @@ def _short_test(config: OnlineConfig) -> float:
     """s of newest data of the change detector's quick test: one refit period, 3 s to a third of
     ``change_test_length``."""
     return min(max(config.refit_period, 3.0), config.change_test_length / 3)
+
+
+def _better_search(cold: Estimate, warm: Estimate) -> bool:
+    """Whether the cold fit replaces a warm one that got stuck or did not converge: it did not get
+    stuck itself and converged where the warm one did not, or ran closer to the data (cost)."""
+    if any(f in STUCK_FLAGS for f in cold.flags):
+        return any(f in STUCK_FLAGS for f in warm.flags)
+    if any(f in STUCK_FLAGS for f in warm.flags):
+        return True
+    cold_converged, warm_converged = ("oe_not_converged" not in e.flags for e in (cold, warm))
+    if cold_converged != warm_converged:
+        return cold_converged
+    return cold.info.get("cost_ratio", math.inf) < warm.info.get("cost_ratio", math.inf)
 
 
 def _on_bound(structure: Structure, params: dict) -> str:

@@ -379,9 +379,12 @@ class OutputError(Estimator):
 
         def polished(x, weighting):
             """``x`` after up to START_POLISH_STEPS Gauss-Newton steps on the unknowns its free run
-            is (nearly) linear in, each kept while it lowers the cost under ``weighting``."""
-            nonlocal weigh
-            weigh = weighting
+            is (nearly) linear in, each kept while it lowers the cost under ``weighting`` and the
+            start's own Huber weights (sensor spikes steer neither the steps nor the choice), and
+            that cost."""
+            nonlocal weigh, robust
+            weigh, robust = weighting, np.ones(2 * dataset.n_samples)
+            robust = huber_weights(residual(x), dataset.n_samples)
             f = residual(x)
             for _ in range(START_POLISH_STEPS):
                 Jc = jacobian(x, f, tuple(i for i in linear if i < p))[:, linear]
@@ -396,11 +399,13 @@ class OutputError(Estimator):
                 if not f_moved @ f_moved < f @ f:
                     break
                 x, f = moved, f_moved
-            return x
+            return x, float(f @ f)
 
         if explore:
-            points = [polished(x, weighting) for x, (weighting, _) in zip(points, weighings)]
-        costs = np.sum(residuals(points, substeps, [w for w, _ in weighings]) ** 2, axis=1)
+            points, costs = zip(*(polished(x, weighting) for x, (weighting, _) in zip(points, weighings)))
+            robust = np.ones(2 * dataset.n_samples)
+        else:
+            costs = np.sum(residuals(points, substeps, [w for w, _ in weighings]) ** 2, axis=1)
         best = int(np.argmin(costs + dataset.n_samples * np.array([d for _, d in weighings])))
         x0, weigh = points[best], weighings[best][0]
 

@@ -67,6 +67,15 @@ RESCUE_MAX_COST = 4.0  # ... when its mean squared residual is within this many 
 SPARSE_INTERVALS = 12  # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
 TIME_CONSTANT_STARTS = (1.0, 3.0, 10.0, 30.0, 100.0)  # s, main time constants also started from
 START_POLISH_STEPS = 2  # Gauss-Newton steps on a start's gain, rudder offset and states before starts are compared
+# A regression start flagged so has missed the hull's time scale (a slow ship's yaw rate buried in its
+# noise put T1 at its 0.01 s floor): the search then explores
+MISSED_TIME_SCALE_FLAGS = (
+    "complex_time_constants",
+    "diverged",
+    "T_out_of_bounds",
+    "T1_out_of_bounds",
+    "T2_out_of_bounds",
+)
 LINEAR_NAMES = ("K", "delta_r")  # a start's free run is (nearly) linear in these: fitted before starts are compared
 
 
@@ -201,10 +210,11 @@ class OutputError(Estimator):
         starts from the regression fit of the bare model with the effects at their neutral values
         (an effect's regression column can make the regression start course-unstable: KVLCC2 with
         cubic_yaw, T < 0); given starts take its place (they come from such models already). Without
-        ``starts`` the search also explores (``_refine``): a given start is a converged estimate of a
-        nearby window, and the online refit stays as quick as it was."""
+        ``starts``, when the regression missed the time scale (MISSED_TIME_SCALE_FLAGS), the search
+        also explores (``_refine``); a given start is a converged estimate of a nearby window, and a
+        sound regression start needs no exploring (the refit stays as quick as it was)."""
         first = self.start.fit(structure, dataset)
-        explore = not starts
+        explore = not starts and any(f in MISSED_TIME_SCALE_FLAGS for f in first.flags)
         if not starts and structure.effects:
             bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
             starts = (structure.neutral_effect_start(bare),)

@@ -100,6 +100,11 @@ class InnovationFilter:
     C: np.ndarray
     s_inv_sqrt: np.ndarray
 
+    @property
+    def log_det_covariance(self) -> float:
+        """log det S: with the whitened squares, -2 log-likelihood per sample is |S^-1/2 e|^2 + log det S."""
+        return float(-2.0 * np.linalg.slogdet(self.s_inv_sqrt)[1])
+
     def whiten(self, errors: np.ndarray) -> np.ndarray:
         """S^-1/2 e_k (N x 2) of a free-run error series (N x 2, heading and yaw rate), predictor
         started at zero (the series starts from a known state)."""

@@ -105,6 +105,7 @@ TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.05, "T1": 0.05}
 # with the gain or the main time constant on a bound (no hull has K = 100 1/s), or it stopped
 # before it converged.
 STUCK_FLAGS = ("at_bound:K", "at_bound:T", "at_bound:T1")  # a warm start that ends here is refitted cold
+RETRY_COLD_FLAGS = STUCK_FLAGS + ("oe_not_converged",)  # ... and one whose search did not converge
 POOR_FIT_FLAGS = (
     "complex_time_constants",
     "K_out_of_bounds",
@@ -364,10 +365,12 @@ class OnlineIdentifier:
             estimate = None
             if last_good is not None and last_good.ok and last_good.method == config.method:
                 estimate = estimator.fit(structure, dataset, starts=(last_good.parameters,))  # warm start
-                if any(f in STUCK_FLAGS for f in estimate.flags):
-                    estimate = None  # the vessel changed beyond the warm start's reach: fit afresh
-            if estimate is None:
-                estimate = estimator.fit(structure, dataset)
+            if estimate is None or any(f in RETRY_COLD_FLAGS for f in estimate.flags):
+                # none, or the vessel changed beyond the warm start's reach, or the search crawled
+                # along a valley from it: fit afresh (exploring time scales), keep the better search
+                cold = estimator.fit(structure, dataset)
+                if estimate is None or _better_search(cold, estimate):
+                    estimate = cold
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record.conditions["refit_failed"] = f"{type(exc).__name__}: {exc}"
             return
@@ -594,6 +597,19 @@ def _short_test(config: OnlineConfig) -> float:
     return min(max(config.refit_period, 3.0), config.change_test_length / 3)
 
 
+def _better_search(cold: Estimate, warm: Estimate) -> bool:
+    """Whether the cold fit replaces a warm one that got stuck or did not converge: it did not get
+    stuck itself and converged where the warm one did not, or ran closer to the data (cost)."""
+    if any(f in STUCK_FLAGS for f in cold.flags):
+        return any(f in STUCK_FLAGS for f in warm.flags)
+    if any(f in STUCK_FLAGS for f in warm.flags):
+        return True
+    cold_converged, warm_converged = ("oe_not_converged" not in e.flags for e in (cold, warm))
+    if cold_converged != warm_converged:
+        return cold_converged
+    return cold.info.get("cost_ratio", math.inf) < warm.info.get("cost_ratio", math.inf)
+
+
 def _on_bound(structure: Structure, params: dict) -> str:
     """'T1 = 999.5 s on its bound 1000 s' for parameters at a physical bound ('' when none); a zero
     lower bound (no lead, no dead time) is physical, not a limit."""
@@ -622,10 +638,14 @@ class EstimateScatter:
     """Standard errors that cover the scatter of successive estimates, model error included.
 
     The estimator's standard errors know the sensor noise only. Two estimates of a right model
-    from windows sharing a share f of their data differ by about sqrt((1 - f) (s1^2 + s2^2)), so
-    the differences of the last SCATTER_PAIRS successive estimates, in those units, have an RMS
-    of about 1; where the model misses the vessel (or the data cannot separate two parameters)
-    they scatter further, and each parameter's standard error is multiplied by its RMS when above 1.
+    from windows sharing a share f of their data differ by about sqrt((1 - f) (s1^2 + s2^2)) when
+    the information is spread evenly over the data, and by at least sqrt(|s1^2 - s2^2|) when it is
+    not (a turn leaving a window of straight legs takes most of its information along: the
+    estimate of the window with less information scatters about the other's by the difference
+    of their variances); so the differences of the last SCATTER_PAIRS successive estimates, in
+    the larger of those units, have an RMS of about 1; where the model misses the vessel (or the
+    data cannot separate two parameters) they scatter further, and each parameter's standard
+    error is multiplied by its RMS when above 1.
     """
 
     def __init__(self):
@@ -646,9 +666,10 @@ class EstimateScatter:
             span = max(a.window[1] - a.window[0], b.window[1] - b.window[0], 1e-9)
             fresh = max(1.0 - overlap / span, 1e-3)
             for name in squares:
-                joint = math.hypot(a.std_errors.get(name, 0.0), b.std_errors.get(name, 0.0))
-                if joint > 0 and math.isfinite(joint) and name in a.parameters:
-                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / (fresh * joint**2))
+                sa, sb = a.std_errors.get(name, 0.0), b.std_errors.get(name, 0.0)
+                expected = max(fresh * (sa**2 + sb**2), abs(sa**2 - sb**2))
+                if expected > 0 and math.isfinite(expected) and name in a.parameters:
+                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / expected)
         return {name: max(1.0, math.sqrt(float(np.mean(z)))) if z else 1.0 for name, z in squares.items()}
 
     def honest(self, estimate) -> dict:

@@ -64,6 +64,18 @@ AT_BOUND_SHARE = 0.01  # within 1 % of a bound's value is on it (T1 = 999 s of 1
 RESCUE_ITERATIONS_FACTOR = 2  # a search not converged in max_iterations goes on this many times longer
 RESCUE_MAX_COST = 4.0  # ... when its mean squared residual is within this many noise variances
 SPARSE_INTERVALS = 12  # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
+TIME_CONSTANT_STARTS = (1.0, 3.0, 10.0, 30.0, 100.0)  # s, main time constants also started from
+START_POLISH_STEPS = 2  # Gauss-Newton steps on a start's gain, rudder offset and states before starts are compared
+# A regression start flagged so has missed the hull's time scale (a slow ship's yaw rate buried in its
+# noise put T1 at its 0.01 s floor): the search then explores
+MISSED_TIME_SCALE_FLAGS = (
+    "complex_time_constants",
+    "diverged",
+    "T_out_of_bounds",
+    "T1_out_of_bounds",
+    "T2_out_of_bounds",
+)
+LINEAR_NAMES = ("K", "delta_r")  # a start's free run is (nearly) linear in these: fitted before starts are compared
 
 
 def shooting_intervals(segments, samples_per_interval: int) -> tuple[tuple[int, int], ...]:
@@ -198,12 +210,16 @@ class OutputError(Estimator):
         whichever simulates closest to the data. Without ``starts``, a model with effects also
         starts from the regression fit of the bare model with the effects at their neutral values
         (an effect's regression column can make the regression start course-unstable: KVLCC2 with
-        cubic_yaw, T < 0); given starts take its place (they come from such models already)."""
+        cubic_yaw, T < 0); given starts take its place (they come from such models already). Without
+        ``starts``, when the regression missed the time scale (MISSED_TIME_SCALE_FLAGS), the search
+        also explores (``_refine``); a given start is a converged estimate of a nearby window, and a
+        sound regression start needs no exploring (the refit stays as quick as it was)."""
         first = self.start.fit(structure, dataset)
+        explore = not starts and any(f in MISSED_TIME_SCALE_FLAGS for f in first.flags)
         if not starts and structure.effects:
             bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
             starts = (structure.neutral_effect_start(bare),)
-        return self._refine(structure, dataset, first, tuple(starts))
+        return self._refine(structure, dataset, first, tuple(starts), explore)
 
     def intervals(self, dataset: Dataset) -> tuple:
         """Shooting intervals: each restarts the free run from its own estimated state."""
@@ -211,8 +227,10 @@ class OutputError(Estimator):
 
     @staticmethod
     def residual_weighting(structure, dataset, params0, s_psi, s_r, intervals):
-        """Map free-run errors to the residual vector: here each scaled by its white-noise level."""
-        return lambda psi_err, r_err: np.concatenate([psi_err / s_psi, r_err / s_r])
+        """Map free-run errors to the residual vector (here each scaled by its white-noise level),
+        and the log-determinant of the residual covariance per sample in those units (here 0: it
+        does not depend on the parameters), which with the squared residuals makes -2 log-likelihood."""
+        return (lambda psi_err, r_err: np.concatenate([psi_err / s_psi, r_err / s_r])), 0.0
 
     @staticmethod
     def bandwidth(intervals) -> int:
@@ -220,9 +238,13 @@ class OutputError(Estimator):
         return max(b - a for a, b in intervals)
 
     @staticmethod
-    def _starts(structure: Structure, names: list, x0: np.ndarray, params0: dict) -> list:
-        """The regression's start and a conservative one (effects at their neutral values,
-        T2 and T3 small), since a noisy regression can start the simulation unstable."""
+    def _starts(structure: Structure, names: list, x0: np.ndarray, params0: dict, explore: bool = True) -> list:
+        """The regression's start, a conservative one (effects at their neutral values, T2 and T3
+        small), since a noisy regression can start the simulation unstable, and (``explore``) the
+        conservative one with its main time constant at each of TIME_CONSTANT_STARTS (T2 a tenth of it): a
+        regression on a yaw rate buried in its noise can miss the time scale altogether (a slow
+        ship's T1 of 15 s came out at its 0.01 s floor, and every search from there stayed in
+        that basin)."""
         conservative = x0.copy()
         for i, name in enumerate(names):
             if name in ("K", "T", "T1"):
@@ -233,7 +255,16 @@ class OutputError(Estimator):
                 conservative[i] = 0.0
             else:
                 conservative[i] = structure.parameter(name).initial
-        return [x0, conservative]
+        time_scales = []
+        main = "T1" if "T1" in names else "T" if "T" in names else None
+        for value in TIME_CONSTANT_STARTS if main and explore else ():
+            scaled = conservative.copy()
+            scaled[names.index(main)] = value
+            if "T2" in names:
+                scaled[names.index("T2")] = 0.1 * value
+                scaled[names.index("T3")] = 0.0
+            time_scales.append(scaled)
+        return [x0, conservative, *time_scales]
 
     @staticmethod
     def _in_valley_foot(names: list, x: np.ndarray) -> bool:
@@ -263,9 +294,13 @@ class OutputError(Estimator):
             out.append(valley)
         return out
 
-    def _refine(self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple) -> Estimate:
+    def _refine(
+        self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple, explore: bool = True
+    ) -> Estimate:
         """Minimise the free-run error from ``first`` (the regression fit, and its conservative
-        variant) or from any of ``starts``, whichever simulates closest to the data."""
+        variant) or from any of ``starts``, whichever simulates closest to the data; ``explore``:
+        also from a range of time constants, every start's gain, rudder offset and states polished
+        first (a cold fit; a warm one, from an estimate of a nearby window, needs neither)."""
         names = structure.free_names
         p = len(names)
         lower, upper = structure.bounds(names, dataset)
@@ -275,7 +310,6 @@ class OutputError(Estimator):
         s_r = dataset.noise_std("yaw_rate")
         intervals = self.intervals(dataset)
         shots = replace(dataset, segments=intervals)
-        weigh = self.residual_weighting(structure, dataset, params0, s_psi, s_r, intervals)
         n_state = 3 if structure.order == 2 else 2
         bias0 = structure.yaw_rate_bias(params0)
         states0 = np.array([[dataset.heading[a], dataset.yaw_rate[a] - bias0, 0.0][:n_state] for a, _ in intervals])
@@ -291,8 +325,9 @@ class OutputError(Estimator):
         simulations = 0
         robust = np.ones(2 * dataset.n_samples)  # Huber weights (square roots), fixed at the start
 
-        def residuals(points, substeps):
-            """Weighted residual vectors of several points (rows), simulated in one compiled call."""
+        def residuals(points, substeps, weighs=None):
+            """Weighted residual vectors of several points (rows), simulated in one compiled call;
+            ``weighs``: each point's own weighting (default: the search's)."""
             nonlocal simulations
             simulations += len(points)
             runs = [unpack(x) for x in points]
@@ -301,7 +336,7 @@ class OutputError(Estimator):
             for k in range(len(points)):
                 psi_err, r_err = psi[k] - dataset.heading, r[k] - dataset.yaw_rate
                 if np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err)):
-                    out[k] = robust * weigh(psi_err, r_err)
+                    out[k] = robust * (weighs[k] if weighs else weigh)(psi_err, r_err)
             return out
 
         def residual(x):
@@ -314,12 +349,13 @@ class OutputError(Estimator):
         columns[:, :p] = np.arange(p)
         columns[:, p:] = p + n_state * np.concatenate([owner, owner])[:, None] + np.arange(n_state)
 
-        def jacobian(x, f0):
+        def jacobian(x, f0, chosen=tuple(range(p))):
             """Forward differences, all simulated in one call at the substeps of ``x``: one run per
-            parameter, one per state component (the intervals' states touch disjoint rows)."""
+            parameter (of ``chosen``; the others' columns are zero), one per state component (the
+            intervals' states touch disjoint rows)."""
             steps = 1e-6 * np.maximum(np.abs(x), 1e-2)
             points = []
-            for j in range(p):
+            for j in chosen:
                 xs = x.copy()
                 xs[j] += steps[j] if x[j] + steps[j] <= upper[j] else -steps[j]
                 points.append(xs)
@@ -328,9 +364,10 @@ class OutputError(Estimator):
                 xs[p + c :: n_state] += steps[p + c :: n_state]
                 points.append(xs)
             diff = residuals(points, fit_substeps(h, unpack(x)[0])) - f0
-            values = np.empty(columns.shape)
-            values[:, :p] = (diff[:p] / (np.array(points)[:, :p].diagonal() - x[:p])[:, None]).T
-            values[:, p:] = diff[p:].T / steps[columns[:, p:]]
+            values = np.zeros(columns.shape)
+            m, varied = len(chosen), list(chosen)
+            values[:, varied] = (diff[:m] / (np.array(points)[:, varied].diagonal() - x[varied])[:, None]).T
+            values[:, p:] = diff[m:].T / steps[columns[:, p:]]
             if len(intervals) > SPARSE_INTERVALS:
                 row_starts = np.arange(0, values.size + 1, p + n_state)
                 return sparse.csr_matrix((values.ravel(), columns.ravel(), row_starts), shape=(len(f0), len(x)))
@@ -340,12 +377,48 @@ class OutputError(Estimator):
 
         lo = np.concatenate([lower, np.full(states0.size, -np.inf)])
         hi = np.concatenate([upper, np.full(states0.size, np.inf)])
-        guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0) + [
+        guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0, explore) + [
             np.array([structure.clip_to_bounds(dict(params0, **s))[n] for n in names]) for s in starts
         ]
         points = [np.clip(np.concatenate([g, states0.ravel()]), lo, hi) for g in guesses]
         substeps = max(fit_substeps(h, unpack(x)[0]) for x in points)
-        x0 = points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))]
+        # each start judged with the noise model at its own parameters (-2 log-likelihood: one fixed
+        # at a regression start that missed the time scale favours starts near it) and with the
+        # unknowns its free run is linear in (gain, rudder offset, interval states) fitted
+        weighings = [self.residual_weighting(structure, dataset, unpack(x)[0], s_psi, s_r, intervals) for x in points]
+        linear = [names.index(n) for n in LINEAR_NAMES if n in names] + list(range(p, p + states0.size))
+
+        def polished(x, weighting):
+            """``x`` after up to START_POLISH_STEPS Gauss-Newton steps on the unknowns its free run
+            is (nearly) linear in, each kept while it lowers the cost under ``weighting`` and the
+            start's own Huber weights (sensor spikes steer neither the steps nor the choice), and
+            that cost."""
+            nonlocal weigh, robust
+            weigh, robust = weighting, np.ones(2 * dataset.n_samples)
+            robust = huber_weights(residual(x), dataset.n_samples)
+            f = residual(x)
+            for _ in range(START_POLISH_STEPS):
+                Jc = jacobian(x, f, tuple(i for i in linear if i < p))[:, linear]
+                try:
+                    step = -scaled_inverse(_dense(Jc.T @ Jc)) @ np.asarray(Jc.T @ f).ravel()
+                except np.linalg.LinAlgError:
+                    break
+                moved = x.copy()
+                moved[linear] += step
+                moved = np.clip(moved, lo, hi)
+                f_moved = residual(moved)
+                if not f_moved @ f_moved < f @ f:
+                    break
+                x, f = moved, f_moved
+            return x, float(f @ f)
+
+        if explore:
+            points, costs = zip(*(polished(x, weighting) for x, (weighting, _) in zip(points, weighings)))
+            robust = np.ones(2 * dataset.n_samples)
+        else:
+            costs = np.sum(residuals(points, substeps, [w for w, _ in weighings]) ** 2, axis=1)
+        best = int(np.argmin(costs + dataset.n_samples * np.array([d for _, d in weighings])))
+        x0, weigh = points[best], weighings[best][0]
 
         def along_valley(x):
             """The best of ``x`` and its variants along the T2 = T3 valley, each with the yaw

@@ -66,7 +66,7 @@ class PredictionError(OutputError):
                 out[a:z] = kalman.whiten(errors[a:z])
             return -out.T.ravel()
 
-        return weigh
+        return weigh, kalman.log_det_covariance
 
     @staticmethod
     def bandwidth(intervals) -> int:

@@ -638,14 +638,10 @@ class EstimateScatter:
     """Standard errors that cover the scatter of successive estimates, model error included.
 
     The estimator's standard errors know the sensor noise only. Two estimates of a right model
-    from windows sharing a share f of their data differ by about sqrt((1 - f) (s1^2 + s2^2)) when
-    the information is spread evenly over the data, and by at least sqrt(|s1^2 - s2^2|) when it is
-    not (a turn leaving a window of straight legs takes most of its information along: the
-    estimate of the window with less information scatters about the other's by the difference
-    of their variances); so the differences of the last SCATTER_PAIRS successive estimates, in
-    the larger of those units, have an RMS of about 1; where the model misses the vessel (or the
-    data cannot separate two parameters) they scatter further, and each parameter's standard
-    error is multiplied by its RMS when above 1.
+    from windows sharing a share f of their data differ by about sqrt((1 - f) (s1^2 + s2^2)), so
+    the differences of the last SCATTER_PAIRS successive estimates, in those units, have an RMS
+    of about 1; where the model misses the vessel (or the data cannot separate two parameters)
+    they scatter further, and each parameter's standard error is multiplied by its RMS when above 1.
     """
 
     def __init__(self):
@@ -666,10 +662,9 @@ class EstimateScatter:
             span = max(a.window[1] - a.window[0], b.window[1] - b.window[0], 1e-9)
             fresh = max(1.0 - overlap / span, 1e-3)
             for name in squares:
-                sa, sb = a.std_errors.get(name, 0.0), b.std_errors.get(name, 0.0)
-                expected = max(fresh * (sa**2 + sb**2), abs(sa**2 - sb**2))
-                if expected > 0 and math.isfinite(expected) and name in a.parameters:
-                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / expected)
+                joint = math.hypot(a.std_errors.get(name, 0.0), b.std_errors.get(name, 0.0))
+                if joint > 0 and math.isfinite(joint) and name in a.parameters:
+                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / (fresh * joint**2))
         return {name: max(1.0, math.sqrt(float(np.mean(z)))) if z else 1.0 for name, z in squares.items()}
 
     def honest(self, estimate) -> dict:

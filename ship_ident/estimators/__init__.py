@@ -29,15 +29,16 @@ def regression_method(method: str) -> str:
     return method.partition("+")[0]
 
 
-def make_estimator(method: str = DEFAULT_METHOD, **options) -> Estimator:
-    """Build an estimator from ``NAME``, ``NAME+oe`` or ``NAME+pem``; options go to the base estimator."""
+def make_estimator(method: str = DEFAULT_METHOD, explore: bool = True, **options) -> Estimator:
+    """Build an estimator from ``NAME``, ``NAME+oe`` or ``NAME+pem``; ``explore`` goes to the
+    refinement (``OutputError``), other options to the base estimator."""
     base, _, refine = method.partition("+")
     if base not in ESTIMATORS:
         raise MethodError(f"unknown method {method!r}; choose from {', '.join(method_names())}")
     if refine and refine not in REFINEMENTS:
         raise MethodError(f"unknown refinement {refine!r} in {method!r}; use NAME+oe or NAME+pem")
     estimator = ESTIMATORS[base](**options)
-    return REFINEMENTS[refine](estimator) if refine else estimator
+    return REFINEMENTS[refine](estimator, explore=explore) if refine else estimator
 
 
 __all__ = [

@@ -197,10 +197,13 @@ class OutputError(Estimator):
 
     uses_starts = True
 
-    def __init__(self, start: Estimator, max_iterations: int = 30, shooting_s: float = 30.0):
+    def __init__(self, start: Estimator, max_iterations: int = 30, shooting_s: float = 30.0, explore: bool = True):
+        """``explore``: when the regression start missed the time scale, also search from a range of
+        main time constants (``fit``)."""
         self.start = start
         self.max_iterations = max_iterations
         self.shooting_s = shooting_s
+        self.explore = explore
         self.name = f"{start.name}+oe"
 
     def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
@@ -215,7 +218,7 @@ class OutputError(Estimator):
         also explores (``_refine``); a given start is a converged estimate of a nearby window, and a
         sound regression start needs no exploring (the refit stays as quick as it was)."""
         first = self.start.fit(structure, dataset)
-        explore = not starts and any(f in MISSED_TIME_SCALE_FLAGS for f in first.flags)
+        explore = self.explore and not starts and any(f in MISSED_TIME_SCALE_FLAGS for f in first.flags)
         if not starts and structure.effects:
             bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
             starts = (structure.neutral_effect_start(bare),)

@@ -52,6 +52,13 @@ MIN_LEVEL = SENSOR_RESOLUTION**2  # (rad/s)^2: no yaw-rate sensor resolves finer
 # A reference model must be well determined: relative standard errors at most these (a window of
 # steady turning gives a K to 10-25 % and T1 to 60-400 %, and any new rudder motion surprises it).
 REFERENCE_RELATIVE_ERRORS = {"K": 0.05, "T": 0.2, "T1": 0.2}
+# The gain test: a newest block mispredicted by more than GAIN_TEST_RATIO (below ``ratio``) also votes
+# for a change when K refitted on it moves by more than GAIN_TEST_SHIFT and GAIN_TEST_STANDARD_ERRORS
+# (a loaded hull in a steady turn, its yaw rate 30 % low, shows only 4-6x its usual error in noisy
+# data: a changed gain, not noise or a manoeuvre the model meets badly).
+GAIN_TEST_RATIO = 3.0
+GAIN_TEST_SHIFT = 0.15
+GAIN_TEST_STANDARD_ERRORS = 5.0
 
 
 def covering_blocks(dataset: Dataset, n: int) -> tuple:
@@ -152,7 +159,8 @@ class ChangeDetector:
             ratio = short
         else:
             ratio = float(block_errors(structure, reference[1], dataset, ((stop - n, stop),))[0]) / reference[2]
-            self.votes = self.votes + 1 if ratio > self.ratio else 0
+            shifted = ratio > GAIN_TEST_RATIO and gain_shifted(structure, reference[1], dataset.slice(stop - n, stop))
+            self.votes = self.votes + 1 if ratio > self.ratio or shifted else 0
         if self.votes < CONFIRMATIONS and self.short_votes < CONFIRMATIONS:
             return ratio, None
         if self.short_votes >= CONFIRMATIONS:
@@ -163,6 +171,14 @@ class ChangeDetector:
         _, r = structure.simulate(params, dataset.slice(a, stop))
         squared = np.minimum((r - dataset.yaw_rate[a:stop]) ** 2, 100 * self.ratio * level)
         return ratio, float(dataset.time[a + variance_change_point(squared)])
+
+
+def gain_shifted(structure: Structure, params: dict, dataset: Dataset) -> bool:
+    """Whether K refitted on ``dataset`` (its start fitted, the rest held at ``params``) moved from
+    ``params``' K by more than GAIN_TEST_SHIFT of it and GAIN_TEST_STANDARD_ERRORS of the refit."""
+    fitted, errors = fit_gain(structure, params, dataset, dataset.segments)
+    shift = abs(fitted["K"] - params["K"])
+    return bool(shift > GAIN_TEST_SHIFT * abs(params["K"]) and shift > GAIN_TEST_STANDARD_ERRORS * errors["K"])
 
 
 def fit_gain(

@@ -531,6 +531,60 @@ def test_a_changed_vessel_is_followed_within_10_s(maneuver):
     assert recovery_time(times, ks, change, sim.info["truth_after"]["K"]) <= 10.0
 
 
+@pytest.mark.slow
+def test_a_rudder_held_in_a_turn_after_a_change_gives_the_new_K():
+    """bench vessels' seed 5000 USV (T1 7.4 s) loses 30 % of K (T1 +30 %) as the mixed manoeuvre's
+    zigzag ends and its 20 deg turn begins: the rudder then hardly moves, yet r = K delta determines
+    K. K refitted on the turn (its start, mid-transient, fitted too) is within 5 % of the new value
+    15 s after the change (45 s when a still rudder was refused and the free run started steady)."""
+    from ship_ident.bench.peers import dataset_samples, recovery_time
+
+    vessel = random_vessel(np.random.default_rng(5000))
+    change = 200.0
+    truth = vessel.parameters
+    sim = simulate(
+        "mixed",
+        vessel,
+        duration=2 * change,
+        noise=Noise().scaled(0.5),
+        seed=5000,
+        change=(change, {"K": 0.7 * truth["K"], "T1": 1.3 * truth["T1"]}),
+    )
+    held = (sim.dataset.time > change + 5) & (sim.dataset.time < change + 40)
+    assert np.degrees(np.std(sim.dataset.rudder[held])) < 0.2  # the rudder is held
+    samples = [s for s in dataset_samples(sim.dataset) if s.time <= change + 40]
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig()), samples))
+    k_new = sim.info["truth_after"]["K"]
+    assert recovery_time(*k_trace(records), change, k_new) <= 15.0
+    assert all(abs(k / k_new - 1) < 0.05 for t, k in zip(*k_trace(records)) if t >= change + 15)
+
+
+@pytest.mark.slow
+def test_a_gain_lost_in_a_noisy_steady_turn_is_found():
+    """bench vessels' seed 2367799915 USV (T1 4.7 s) in steady turns with twice the realistic noise
+    loses 30 % of K (T1 +30 %) at 200 s: its yaw rate, 30 % low, shows only about 5x the usual
+    free-run error (under change_ratio 9), but K refitted on the newest 30 s moves by 30 %: the
+    change is found and K is back within 5 % 30 s after it (never with the error ratio alone)."""
+    from ship_ident.bench.peers import dataset_samples, recovery_time
+
+    vessel = random_vessel(np.random.default_rng(2367799915))
+    change = 200.0
+    truth = vessel.parameters
+    sim = simulate(
+        "steady_turns",
+        vessel,
+        duration=2 * change,
+        noise=Noise().scaled(2.0),
+        seed=2,
+        change=(change, {"K": 0.7 * truth["K"], "T1": 1.3 * truth["T1"]}),
+    )
+    samples = [s for s in dataset_samples(sim.dataset) if s.time <= change + 80]
+    records = list(run_schedule(OnlineIdentifier(OnlineConfig()), samples))
+    alarms = [r.time for r in records if "vessel_changed" in r.conditions]
+    assert alarms and change < alarms[0] <= change + 30.0
+    assert recovery_time(*k_trace(records), change, sim.info["truth_after"]["K"]) <= 30.0
+
+
 def test_a_full_window_at_an_odd_sample_time_calibrates_the_change_test():
     """61.3 s at 0.37 s: the resampled window spans 2-3 sample times less than window_length (its
     newest sample a step old, the grid's floor); it is still full, and its estimates become the

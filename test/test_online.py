@@ -531,6 +531,21 @@ def test_a_changed_vessel_is_followed_within_10_s(maneuver):
     assert recovery_time(times, ks, change, sim.info["truth_after"]["K"]) <= 10.0
 
 
+def _losing_gain(vessel_seed: int, manoeuvre: str, noise_scale: float, seed: int, change: float):
+    """bench vessels' vessel of ``vessel_seed`` on ``manoeuvre`` (noise scaled by ``noise_scale``),
+    losing 30 % of K as T1 grows 30 % at ``change`` s, for twice that long."""
+    vessel = random_vessel(np.random.default_rng(vessel_seed))
+    truth = vessel.parameters
+    return simulate(
+        manoeuvre,
+        vessel,
+        duration=2 * change,
+        noise=Noise().scaled(noise_scale),
+        seed=seed,
+        change=(change, {"K": 0.7 * truth["K"], "T1": 1.3 * truth["T1"]}),
+    )
+
+
 @pytest.mark.slow
 def test_a_rudder_held_in_a_turn_after_a_change_gives_the_new_K():
     """bench vessels' seed 5000 USV (T1 7.4 s) loses 30 % of K (T1 +30 %) as the mixed manoeuvre's
@@ -539,17 +554,8 @@ def test_a_rudder_held_in_a_turn_after_a_change_gives_the_new_K():
     15 s after the change (45 s when a still rudder was refused and the free run started steady)."""
     from ship_ident.bench.peers import dataset_samples, recovery_time
 
-    vessel = random_vessel(np.random.default_rng(5000))
     change = 200.0
-    truth = vessel.parameters
-    sim = simulate(
-        "mixed",
-        vessel,
-        duration=2 * change,
-        noise=Noise().scaled(0.5),
-        seed=5000,
-        change=(change, {"K": 0.7 * truth["K"], "T1": 1.3 * truth["T1"]}),
-    )
+    sim = _losing_gain(5000, "mixed", 0.5, 5000, change)
     held = (sim.dataset.time > change + 5) & (sim.dataset.time < change + 40)
     assert np.degrees(np.std(sim.dataset.rudder[held])) < 0.2  # the rudder is held
     samples = [s for s in dataset_samples(sim.dataset) if s.time <= change + 40]
@@ -567,17 +573,8 @@ def test_a_gain_lost_in_a_noisy_steady_turn_is_found():
     change is found and K is back within 5 % 30 s after it (never with the error ratio alone)."""
     from ship_ident.bench.peers import dataset_samples, recovery_time
 
-    vessel = random_vessel(np.random.default_rng(2367799915))
     change = 200.0
-    truth = vessel.parameters
-    sim = simulate(
-        "steady_turns",
-        vessel,
-        duration=2 * change,
-        noise=Noise().scaled(2.0),
-        seed=2,
-        change=(change, {"K": 0.7 * truth["K"], "T1": 1.3 * truth["T1"]}),
-    )
+    sim = _losing_gain(2367799915, "steady_turns", 2.0, 2, change)
     samples = [s for s in dataset_samples(sim.dataset) if s.time <= change + 80]
     records = list(run_schedule(OnlineIdentifier(OnlineConfig()), samples))
     alarms = [r.time for r in records if "vessel_changed" in r.conditions]

@@ -639,6 +639,15 @@ REBASE_AT_NOISE = 1.5  # ... down to the noise (in noise levels): the model then
 REBASE_BASIN = 0.5  # ... or at least halves it: the first search stopped in another basin
 
 
+def _base_start(structure: Structure, refit: Estimate) -> tuple[dict, bool]:
+    """The parameters of ``structure`` (the model without ``refit``'s last effect) in that effect's
+    ``base_equivalent`` of ``refit``, and whether they are another parametrisation of the model (a
+    stable course_instability fit rescaled), not merely ``refit`` with its effect dropped."""
+    equivalent = EFFECTS[refit.structure.effect_names[-1]].base_equivalent(refit.parameters)
+    start = {k: equivalent[k] for k in structure.parameter_names}
+    return start, start != {k: refit.parameters[k] for k in structure.parameter_names}
+
+
 def _rebase(structure: Structure, training: Dataset, method: str, estimate: Estimate, refits: list) -> Estimate | None:
     """The model itself refitted from the candidates' fits with their effects removed, when its own
     search did not converge and the refit ends with a training fit residual below ``REBASE_GAIN``
@@ -664,13 +673,10 @@ def _rebase(structure: Structure, training: Dataset, method: str, estimate: Esti
     ):
         return None
 
-    def base_start(parameters: dict) -> dict:
-        return {k: parameters[k] for k in structure.parameter_names}
-
     plain, rescaled = [], []
     for r in fitted:
-        start = base_start(EFFECTS[r.structure.effect_names[-1]].base_equivalent(r.parameters))
-        (plain if start == base_start(r.parameters) else rescaled).append(start)
+        start, other = _base_start(structure, r)
+        (rescaled if other else plain).append(start)
     tries = [estimator.fit(structure, training, starts=(estimate.parameters, *plain))]
     tries += [estimator.fit(structure, training, starts=(start,)) for start in rescaled]
     refit = min(tries, key=lambda t: t.info["cost_ratio"])
@@ -699,9 +705,8 @@ def _equivalent_base(
     for refit in refits:
         if not isinstance(refit, Estimate):
             continue
-        equivalent = EFFECTS[refit.structure.effect_names[-1]].base_equivalent(refit.parameters)
-        start = {k: equivalent[k] for k in structure.parameter_names}
-        if start == {k: refit.parameters[k] for k in structure.parameter_names}:
+        start, other = _base_start(structure, refit)
+        if not other:
             continue  # the effect dropped: no other parametrisation of the model
         error = free_run(structure, start, fitted_windows).fit["rmse_yaw_rate"]
         if error < best_error:

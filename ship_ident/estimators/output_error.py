@@ -241,7 +241,7 @@ class OutputError(Estimator):
         return max(b - a for a, b in intervals)
 
     @staticmethod
-    def _starts(structure: Structure, names: list, x0: np.ndarray, params0: dict, explore: bool = True) -> list:
+    def _starts(structure: Structure, names: list, x0: np.ndarray, params0: dict, explore: bool) -> list:
         """The regression's start, a conservative one (effects at their neutral values, T2 and T3
         small), since a noisy regression can start the simulation unstable, and (``explore``) the
         conservative one with its main time constant at each of TIME_CONSTANT_STARTS (T2 a tenth of it): a
@@ -298,7 +298,7 @@ class OutputError(Estimator):
         return out
 
     def _refine(
-        self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple, explore: bool = True
+        self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple, explore: bool
     ) -> Estimate:
         """Minimise the free-run error from ``first`` (the regression fit, and its conservative
         variant) or from any of ``starts``, whichever simulates closest to the data; ``explore``:

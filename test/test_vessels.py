@@ -111,6 +111,11 @@ def test_bench_vessels_fixed_seed_sample_against_the_truth():
     assert summary["coverage"]["K"] > 0.8
     assert summary["recovery"]["worst_s"] <= step["window_s"] + step["refit_period_s"]
     assert summary["false_changes_per_hour"] == 0.0
+    assert summary["recovery"]["quick_hull_cases"] == 1
+    assert summary["recovery"]["quick_hull_median_s"] == summary["recovery"]["median_s"]
+    brief = vessels._brief(steady)
+    assert len(brief["refits"]) == len(steady["refits"])
+    assert sum(r["well_excited"] for r in brief["refits"]) == sum(map(vessels.well_excited, steady["refits"]))
     text = vessels.render(
         {
             "summary": summary,

@@ -88,6 +88,7 @@ GAIN_FITS = (("K", "T", "T1"), ("K",))
 GAIN_FIT_SPAN = 1.5
 MIN_GAIN_SAMPLES = 20  # new samples needed for the gain refit after a change
 SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published uncertainty
+SCATTER_REWEIGHTINGS = 4  # least-squares passes of the scatter fit (EstimateScatter)
 # A window is full when its resampled data span window_length within this many sample times: the
 # newest sample of each input may be a sample time old, the oldest a sample time inside the window,
 # and the grid's floor loses one more (with 1.5 a ship's window, sample time 0.37 s, never was).
@@ -637,13 +638,17 @@ def _jump(estimate, reference) -> tuple[float, str]:
 
 
 class EstimateScatter:
-    """Standard errors that cover the scatter of successive estimates, model error included.
+    """Standard errors that cover the scatter of recent estimates, model error included.
 
     The estimator's standard errors know the sensor noise only. Two estimates of a right model
-    from windows sharing a share f of their data differ by about sqrt((1 - f) (s1^2 + s2^2)), so
-    the differences of the last SCATTER_PAIRS successive estimates, in those units, have an RMS
-    of about 1; where the model misses the vessel (or the data cannot separate two parameters)
-    they scatter further, and each parameter's standard error is multiplied by its RMS when above 1.
+    from windows sharing a share 1 - f of their data differ by about sqrt(f (s1^2 + s2^2)). The
+    recent estimates (SCATTER_PAIRS of them) scatter further when the model misses the vessel
+    (an error that drifts with the data: differences grow with f, as phi^2 f (s1^2 + s2^2)) or
+    when each fit lands somewhere else in a flat valley of its cost (an error of its own, sigma,
+    whatever f: 2 sigma^2). Over every pair of recent estimates, d^2 / (f J^2) = phi^2 +
+    sigma^2 2 / (f J^2) (J^2 = s1^2 + s2^2) is fitted by least squares with phi^2, sigma^2 >= 0,
+    and a parameter's published standard error is sqrt(max(phi^2, 1) s^2 + sigma^2): a fit's own
+    error is added once, not inflated by 1 / f as a drifting one is.
     """
 
     def __init__(self):
@@ -655,23 +660,49 @@ class EstimateScatter:
     def forget(self) -> None:
         self.recent.clear()
 
-    def factors(self, estimate) -> dict:
-        """{parameter: inflation factor >= 1} from the recent estimates and this one."""
+    def components(self, estimate) -> dict:
+        """{parameter: (phi^2 >= 1, sigma^2 >= 0)} from the recent estimates and this one."""
         chain_ = list(self.recent) + [estimate]
-        squares = {name: [] for name in estimate.parameters}
-        for a, b in zip(chain_, chain_[1:]):
-            overlap = max(0.0, min(a.window[1], b.window[1]) - max(a.window[0], b.window[0]))
-            span = max(a.window[1] - a.window[0], b.window[1] - b.window[0], 1e-9)
-            fresh = max(1.0 - overlap / span, 1e-3)
-            for name in squares:
-                joint = math.hypot(a.std_errors.get(name, 0.0), b.std_errors.get(name, 0.0))
-                if joint > 0 and math.isfinite(joint) and name in a.parameters:
-                    squares[name].append((b.parameters[name] - a.parameters[name]) ** 2 / (fresh * joint**2))
-        return {name: max(1.0, math.sqrt(float(np.mean(z)))) if z else 1.0 for name, z in squares.items()}
+        pairs = {name: [] for name in estimate.parameters}  # (d^2 / (f J^2), 2 / (f J^2))
+        for i, a in enumerate(chain_):
+            for b in chain_[i + 1 :]:
+                overlap = max(0.0, min(a.window[1], b.window[1]) - max(a.window[0], b.window[0]))
+                span = max(a.window[1] - a.window[0], b.window[1] - b.window[0], 1e-9)
+                fresh = max(1.0 - overlap / span, 1e-3)
+                for name, rows in pairs.items():
+                    joint_square = a.std_errors.get(name, 0.0) ** 2 + b.std_errors.get(name, 0.0) ** 2
+                    if joint_square > 0 and math.isfinite(joint_square) and name in a.parameters:
+                        unit = fresh * joint_square
+                        rows.append(((b.parameters[name] - a.parameters[name]) ** 2 / unit, 2.0 / unit))
+        return {name: _drift_and_own_error(rows) for name, rows in pairs.items()}
 
     def honest(self, estimate) -> dict:
-        factors = self.factors(estimate)
-        return {name: std * factors.get(name, 1.0) for name, std in estimate.std_errors.items()}
+        components = self.components(estimate)
+        honest = {}
+        for name, std in estimate.std_errors.items():
+            phi_square, sigma_square = components.get(name, (1.0, 0.0))
+            honest[name] = math.sqrt(phi_square * std**2 + sigma_square)
+        return honest
+
+
+def _drift_and_own_error(rows: list) -> tuple[float, float]:
+    """(phi^2 >= 1, sigma^2 >= 0): y = phi^2 + sigma^2 x fitted over rows (y, x) by least squares
+    weighted by the inverse square of the fitted y (a squared difference scatters in proportion
+    to its expectation; a few reweightings), both non-negative (one alone when the pair fits a
+    negative value); (1, 0) without rows."""
+    if not rows:
+        return 1.0, 0.0
+    y, x = np.array(rows).T
+    phi_square, sigma_square = float(np.mean(y)), 0.0
+    for _ in range(SCATTER_REWEIGHTINGS):
+        weight = 1.0 / np.maximum(phi_square + sigma_square * x, 1e-12)
+        design = np.column_stack([np.ones_like(x), x]) * weight[:, None]
+        phi_square, sigma_square = np.linalg.lstsq(design, y * weight, rcond=None)[0]
+        if sigma_square < 0:  # the scatter does not grow as the windows share more: a drift only
+            phi_square, sigma_square = float(np.mean(y)), 0.0
+        elif phi_square < 0:  # the scatter does not grow with the fresh share: each fit's own error only
+            phi_square, sigma_square = 0.0, float(np.sum(y * x * weight**2) / np.sum((x * weight) ** 2))
+    return max(float(phi_square), 1.0), float(sigma_square)
 
 
 def run_schedule(identifier: OnlineIdentifier, samples, diagnosis=None):

@@ -330,7 +330,8 @@ def test_spikes_of_50_times_the_noise_move_K_less_than_3_percent(sim, method):
     """1 % of all samples (rudder, heading, yaw rate) off by 50 noise standard deviations.
 
     The weighted LS-SVM's robust weights and the output-error stage's Huber
-    weights hold K within 3 % of its clean value in every window.
+    weights hold K within 3 % of its clean value in every window published OK; an estimate the
+    spikes leave loose (published WARN uncertain_estimate) is within 3 of its standard errors.
     """
     noise = {"rudder": Noise.rudder, "heading": Noise.heading, "yaw_rate": Noise.yaw_rate}
     rng = np.random.default_rng(1)
@@ -343,12 +344,15 @@ def test_spikes_of_50_times_the_noise_move_K_less_than_3_percent(sim, method):
     clean_K = {
         r.time: r.estimate["parameters"]["K"] for r in run_schedule(OnlineIdentifier(config), clean) if r.new_estimate
     }
-    spiky_K = {
-        r.time: r.estimate["parameters"]["K"] for r in run_schedule(OnlineIdentifier(config), spiky) if r.new_estimate
-    }
-    both = sorted(set(clean_K) & set(spiky_K))
+    spiky = {r.time: r for r in run_schedule(OnlineIdentifier(config), spiky) if r.new_estimate}
+    both = sorted(set(clean_K) & set(spiky))
     assert len(both) >= 20
-    assert max(abs(spiky_K[t] / clean_K[t] - 1) for t in both) < 0.03
+    ok = [t for t in both if spiky[t].status == "OK"]
+    assert len(ok) >= 15
+    assert max(abs(spiky[t].estimate["parameters"]["K"] / clean_K[t] - 1) for t in ok) < 0.03
+    for t in set(both) - set(ok):
+        estimate = spiky[t].estimate
+        assert abs(estimate["parameters"]["K"] - clean_K[t]) < 3 * estimate["std_errors"]["K"]
 
 
 def test_input_faster_than_the_sample_bound_is_reported():
@@ -452,25 +456,40 @@ def test_a_jump_beyond_its_uncertainty_or_a_worse_free_run_is_held(sim):
 
 
 def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
-    """Estimates scattering 10 standard errors apart from windows that share 97 % of their data
-    get standard errors about 60 times larger; a right model's (scatter within its errors) keep theirs."""
+    """Over 100 draws of 21 estimates (windows of 180 s, 5 s apart, estimator std 0.001 on K): an
+    error of each fit's own (0.003 whatever the windows share) is published as about
+    sqrt(0.001^2 + 0.003^2), not inflated by 1 / f = 36; estimates drifting 3.5 times their
+    errors as the windows move (a missed effect) get about 3.5 times their errors; estimates that
+    scatter within their errors keep them; 14 errors apart alternately, far wider errors."""
     from ship_ident.estimators.base import Estimate
     from ship_ident.online import EstimateScatter
 
     structure = OnlineConfig(model="nomoto1", effects=()).structure()
+    fresh = 5.0 / 180.0
 
-    def estimate(k, end):
-        return Estimate(structure, "x", {"K": k, "T": 50.0}, {"K": 0.001, "T": 1.0}, {}, 100, window=(end - 180.0, end))
+    def published(ks):
+        scatter = EstimateScatter()
+        estimates = [
+            Estimate(
+                structure, "x", {"K": k, "T": 50.0}, {"K": 0.001, "T": 1.0}, {}, 100, window=(5.0 * i, 180 + 5.0 * i)
+            )
+            for i, k in enumerate(ks)
+        ]
+        for estimate in estimates[:-1]:
+            scatter.add(estimate)
+        return scatter.honest(estimates[-1])
 
-    scatter = EstimateScatter()
-    for i, k in enumerate([0.10, 0.114, 0.10, 0.114]):
-        scatter.add(estimate(k, 180.0 + 5 * i))
-    factors = scatter.factors(estimate(0.10, 200.0))
-    assert 50 < factors["K"] < 70 and factors["T"] == 1.0
-    steady = EstimateScatter()
-    for i, k in enumerate([0.1, 0.1001, 0.0999, 0.1]):
-        steady.add(estimate(k, 180.0 + 5 * i))
-    assert steady.honest(estimate(0.1, 200.0)) == {"K": 0.001, "T": 1.0}
+    rng = np.random.default_rng(7)
+    own = [published(0.1 + 0.003 * rng.standard_normal(21))["K"] for _ in range(100)]
+    assert np.median(own) == pytest.approx(math.hypot(0.001, 0.003), rel=0.15)
+    drift = [
+        published(0.1 + np.cumsum(0.001 * math.sqrt(12.5 * 2 * fresh) * rng.standard_normal(21)))["K"]
+        for _ in range(100)
+    ]
+    assert 0.0025 < np.median(drift) < 0.0045  # phi^2 = 12.5: 0.0035
+    steady = [published(0.1 + 0.001 * math.sqrt(2 * fresh) * rng.standard_normal(21)) for _ in range(100)]
+    assert np.median([s["K"] for s in steady]) < 0.0011 and all(s["T"] == 1.0 for s in steady)
+    assert published([0.10, 0.114] * 10 + [0.10])["K"] > 0.005
 
 
 @pytest.mark.slow

@@ -21,8 +21,8 @@ Figures, all against the simulated truth:
   the share more than 10 % off;
 * rejected refits on well-excited windows: a window is well excited when its
   Cramer-Rao bound (``crb.py``, with the record's rudder noise) puts K within
-  ``WELL_EXCITED['K']`` and T1 within ``WELL_EXCITED['T1']`` (relative std),
-  whatever its signal-to-noise ratios; any refit there that does not give a
+  ``WELL_EXCITED['K']`` and T1 within ``WELL_EXCITED['T1']`` (relative std; half the
+  errors the node trusts), whatever its signal-to-noise ratios; any refit there that does not give a
   new OK estimate is rejected, and its conditions are counted;
 * after the step change: the time until the K in force is back within 5 %
   of the new truth and stays there (``peers.recovery_time``), median (also apart for
@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ..dataset import Dataset
-from ..online import OnlineIdentifier, run_schedule
+from ..online import TRUSTED_RELATIVE_ERRORS, OnlineIdentifier, run_schedule
 from ..online_config import OnlineConfig
 from ..simulator import Noise, random_vessel, simulate
 from . import progress, register
@@ -59,7 +59,11 @@ NOISE_RANGE = (0.5, 3.0)  # multiples of the realistic sensor noise
 STEP_SHARE = 0.5  # share of cases with a change mid-run
 CHANGE = {"K": 0.7, "T1": 1.3}  # factors on the truth at the change
 WINDOWS_PER_RUN = 5.0  # run length in windows (quick: 3); a change at half of it
-WELL_EXCITED = {"K": 0.02, "T1": 0.05}  # CRB relative std at most this: the data determine K and T1
+# A window is well excited when its Cramer-Rao bound puts K and T1 within half the relative errors
+# the node trusts (online.TRUSTED_RELATIVE_ERRORS): no fit's published error can be smaller than the
+# bound, and model error and each fit's own scatter come on top (at the trust limit itself half of
+# the windows of a perfect estimator would be refused)
+WELL_EXCITED = {q: 0.5 * TRUSTED_RELATIVE_ERRORS[q] for q in ("K", "T1")}
 OFF_TOLERANCE = 0.10  # a published OK estimate this far off the truth is wrong
 QUICK_HULL_T1 = 12.0  # s: the recovery target (60 s median) is set for hulls up to this T1
 MAX_SCALE = 10.0  # a ship's window is at most 10 node windows (1800 s)

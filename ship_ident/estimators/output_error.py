@@ -119,6 +119,10 @@ def bounded_levenberg_marquardt(
         g, A = J.T @ f, _dense(J.T @ J)
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         d = np.maximum(np.diag(A)[free], 1e-12)
+        if iteration > 1 and _newton_decrement(A[np.ix_(free, free)], g[free]) <= CHI_SQUARE_TOLERANCE:
+            converged = True  # the Gauss-Newton step would gain less than the tolerance
+            iteration -= 1
+            break
         improved = False
         grow = grow_first
         for _ in range(24 if gentle else 12):
@@ -140,14 +144,22 @@ def bounded_levenberg_marquardt(
             converged = True  # no descent left at this precision
             break
         small_step = np.all(np.abs(x_new - x) <= tolerance * (np.abs(x) + 1e-3))
-        small_gain = cost - cost_new <= max(tolerance * cost, CHI_SQUARE_TOLERANCE)
         x, f, cost = x_new, f_new, cost_new
         lam = max(lam / shrink, 1e-9)
         J = jacobian(x, f)
-        if small_step or small_gain:
+        if small_step:
             converged = True
             break
     return LeastSquaresResult(x=x, fun=f, jac=J, iterations=iteration, success=converged)
+
+
+def _newton_decrement(A: np.ndarray, g: np.ndarray) -> float:
+    """g' A^-1 g: the cost a full Gauss-Newton step would gain (for residuals in noise units, in
+    chi-square units; inf when A is singular)."""
+    try:
+        return float(g @ scaled_inverse(A) @ g)
+    except np.linalg.LinAlgError:
+        return float("inf")
 
 
 def _dense(a) -> np.ndarray:
@@ -439,18 +451,14 @@ class OutputError(Estimator):
         robust = huber_weights(residual(x0), dataset.n_samples)
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
         iterations = result.iterations
-        if (
-            not result.success
-            and self._in_valley_foot(names, result.x[:p])
-            and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun)
-        ):
-            # a model that explains the data to near its noise, crawling up the T2 = T3 valley from
-            # its foot: jump along it and search on gently (a model that misses the motion,
-            # residuals far above the noise, is not helped by more search)
+        if not result.success and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun):
+            # a model that explains the data to near its noise, crawling along a valley (up the
+            # T2 = T3 valley from its foot: jump along it first): search on gently (a model that
+            # misses the motion, residuals far above the noise, is not helped by more search)
             result = bounded_levenberg_marquardt(
                 residual,
                 jacobian,
-                along_valley(result.x),
+                along_valley(result.x) if self._in_valley_foot(names, result.x[:p]) else result.x,
                 lo,
                 hi,
                 RESCUE_ITERATIONS_FACTOR * self.max_iterations,

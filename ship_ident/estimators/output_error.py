@@ -34,10 +34,12 @@ do not drag the fit.
 
 The bounds are the physical ones narrowed by the data (``Structure.bounds``:
 cubic_yaw keeps the model stable over the turn rates the window reaches). A
-nomoto2 search that has not converged in ``max_iterations`` while its T2 is
-still at the foot of the T2 = T3 valley and its residuals near the noise
-(``_valley_starts``) looks along that valley and goes on with a gentler damping
-rule for up to twice as many iterations; any other search ends as it did. A
+search that has not converged in ``max_iterations`` with its residuals near the
+noise is crawling along a curved valley (T1-T2-T3-alpha of a slow ship took 48
+iterations): it goes on with a gentler damping rule for up to twice as many
+iterations, a nomoto2 one with T2 still at the foot of the T2 = T3 valley after a
+look along that valley (``_valley_starts``); a search whose residuals are far
+above the noise misses the motion and ends as it did. A
 parameter within 1 % of a physical bound is reported ``at_bound`` (T1 = 999 s of 1000 s
 is a search that ran off along the K, T1, alpha -> infinity ridge of a window
 no model fits, not a hull).
@@ -56,7 +58,7 @@ from ..structure import Structure
 from .base import Estimate, Estimator, finish_estimate, fit_substeps, scaled_inverse
 
 MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
-CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
+CHI_SQUARE_TOLERANCE = 1e-2  # a Gauss-Newton gain (in noise-variance units) below this ends the search
 MIN_INTERVAL_SAMPLES = 50  # shorter intervals are not split further
 VALLEY_SHARES = (0.03, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the starts along the T2 = T3 valley (nomoto2)
 AT_BOUND_SHARE = 0.01  # within 1 % of a bound's value is on it (T1 = 999 s of 1000 s: a search
@@ -101,10 +103,11 @@ def bounded_levenberg_marquardt(
 
     The normal equations are (p x p) with p the unknowns, so an iteration costs the
     Jacobian's simulations and almost nothing else (``jacobian`` may return a scipy sparse
-    matrix). It stops when a step gains less than ``tolerance`` of the cost (far below the
-    chi-square scatter of the cost, 1/sqrt(N)) or less
-    than ``CHI_SQUARE_TOLERANCE``: the residuals are in noise units, so such a step moves the
-    parameters by a tenth of a standard error or less. The damping lam grows tenfold on a
+    matrix). It stops when a full Gauss-Newton step would gain less than
+    ``CHI_SQUARE_TOLERANCE`` (the Newton decrement g' (J'J)^-1 g; the residuals are in noise
+    units, so the optimum is then a tenth of a standard error away or less; a damped step's small
+    gain is no such sign in a curved valley), or a step moves no unknown by more than
+    ``tolerance`` of its size. The damping lam grows tenfold on a
     rejected step and shrinks tenfold on an accepted one; ``gentle`` (for a search that crawls
     along a curved valley, where lam then swings between a rejected and a needlessly small
     step) doubles it on rejections (x2, x4, ...) and shrinks it threefold (Nielsen's rule).

@@ -396,12 +396,15 @@ class OnlineIdentifier:
         needed = config.min_fit_correlation * best
         at_bounds = [f for f in estimate.flags if f in POOR_FIT_FLAGS]
         if not correlation >= needed or at_bounds:
-            record.conditions["poor_fit"] = (
+            figures = (
                 f"free-run yaw-rate correlation {correlation:.2f} (needs >= {needed:.2f}, "
                 f"{config.min_fit_correlation:g} of the {best:.2f} its noise allows)"
-                f"{', ' + ', '.join(at_bounds) if at_bounds else ''}: "
-                "the model misses the motion; keeping the last good estimate"
             )
+            record.conditions["poor_fit"] = (
+                f"{figures}{', ' + ', '.join(at_bounds) if at_bounds else ''}: the model misses the motion"
+                if not correlation >= needed
+                else f"the search ended {', '.join(at_bounds)} ({figures}): no estimate to trust"
+            ) + "; keeping the last good estimate"
             return
         published = replace(estimate, std_errors=self._scatter.honest(estimate))
         distrust = self._distrust(config, structure, published, dataset, last_good)

@@ -343,9 +343,9 @@ def run(
 
 def _brief(case: dict) -> dict:
     """The case with its line of figures and one short record per refit: time (s), status, whether
-    it published a new estimate, its condition names, K (1/s) and T1 (s) in force with their
-    published standard errors, the window's Cramer-Rao bound (relative std) and whether that makes
-    it well excited: enough to find the refit to replay without the full parameter sets."""
+    it published a new estimate, its condition names, the parameters in force with their
+    published standard errors (SI), the window's Cramer-Rao bound of K and T1 (relative std) and
+    whether that makes it well excited: enough to find a refit to replay."""
     out = {k: v for k, v in case.items() if k != "refits"}
     out["line"] = case_line(case)
     out["refits"] = [
@@ -354,8 +354,8 @@ def _brief(case: dict) -> dict:
             "status": r["status"],
             "new": r["new"],
             "conditions": r["conditions"],
-            **{q: r["parameters"].get(q) for q in ("K", "T1")},
-            **{f"{q}_std": r["std_errors"].get(q) for q in ("K", "T1")},
+            "parameters": r["parameters"],
+            "std_errors": r["std_errors"],
             "crb": r["crb"],
             "well_excited": well_excited(r),
         }

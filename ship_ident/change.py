@@ -24,8 +24,11 @@ in the error's variance; the window then restarts there.
 Right after a change the new data are too short to determine every time
 constant, but a free run is almost linear in the gain: ``fit_gain`` refits
 K (and the main time constant when they determine it) on them with
-everything else held from the last good model (a steady turn with the
-rudder held gives K = r / delta alone).
+everything else held from the reference the change was declared against
+(``base``: a full window's well-determined model of the hull before the
+change; the estimates in force just before it may have come from windows
+straddling the change, bent towards a mixture of the two hulls) (a steady
+turn with the rudder held gives K = r / delta alone).
 """
 
 from __future__ import annotations
@@ -94,6 +97,7 @@ class ChangeDetector:
         self.references = deque()  # (window end s, parameters, usual level (rad/s)^2), oldest first
         self.votes = 0
         self.short_votes = 0
+        self.base = None  # parameters of the reference the last change was declared against, or None
 
     def calibrate(self, structure: Structure, estimate, dataset: Dataset) -> None:
         """Learn the usual error level of a just-accepted estimate on its own (full) window; an
@@ -117,6 +121,7 @@ class ChangeDetector:
     def forget(self) -> None:
         self.references.clear()
         self.votes = self.short_votes = 0
+        self.base = None
 
     def _reference(self, before: float, drop: bool = True):
         """The newest reference fitted on data ending at or before ``before`` (s), or None; older
@@ -167,6 +172,7 @@ class ChangeDetector:
             ratio = max(ratio, short)
         _, params, level = reference
         self.forget()
+        self.base = params
         a = max(start, stop - 2 * n)
         _, r = structure.simulate(params, dataset.slice(a, stop))
         squared = np.minimum((r - dataset.yaw_rate[a:stop]) ** 2, 100 * self.ratio * level)

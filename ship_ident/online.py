@@ -455,20 +455,24 @@ class OnlineIdentifier:
         """After a change, while the new data are shorter than ``min_window_length``: the first set
         of GAIN_FITS they determine (K with the main time constant T1 or T, or K alone) refitted
         on them, run free in blocks of ``change_test_length``, the other parameters held from the
-        last good estimate (a free run is almost linear in K; a held rudder determines it);
+        reference the change was declared against (ChangeDetector.base; the last good estimate
+        without one), not from estimates of windows straddling the change (a USV's cubic damping
+        bent from 0.4 to 147 by them held K 20 % high) (a free run is almost linear in K; a held
+        rudder determines it);
         published when they determine K (standard error within MAX_RELATIVE_ERRORS, however little the
         rudder moves) and pass the checks of any new estimate."""
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.n_samples < MIN_GAIN_SAMPLES:
             return
         blocks = covering_blocks(dataset, int(round(config.change_test_length / dataset.sample_time)))
-        time_constant = last_good.parameters.get("T1", last_good.parameters.get("T"))
+        held = self._change.base or last_good.parameters
+        time_constant = held.get("T1", held.get("T"))
         if dataset.duration < GAIN_FIT_SPAN * time_constant:
             return
         try:
             for names in GAIN_FITS:  # the most the new data determine (judged by the standard errors alone:
                 # a rudder held in a turn determines K, r = K delta, however little it moves)
-                params, errors = fit_gain(structure, last_good.parameters, dataset, blocks, names)
+                params, errors = fit_gain(structure, held, dataset, blocks, names)
                 loose = loose_parameters({n: params[n] for n in errors}, errors, MAX_RELATIVE_ERRORS)[1]
                 if not loose:
                     break

@@ -460,7 +460,8 @@ class OnlineIdentifier:
         bent from 0.4 to 147 by them held K 20 % high) (a free run is almost linear in K; a held
         rudder determines it);
         published when they determine K (standard error within MAX_RELATIVE_ERRORS, however little the
-        rudder moves) and pass the checks of any new estimate."""
+        rudder moves) and pass the checks of any new estimate, judged against the held hull (with the
+        last good estimate's errors)."""
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.n_samples < MIN_GAIN_SAMPLES:
             return
@@ -492,7 +493,10 @@ class OnlineIdentifier:
             window=record.window,
         )
         undetermined = "it diverged" if fit["diverged"] else loose
-        reason = undetermined or self._distrust(config, structure, estimate, dataset, last_good)
+        # judged against the hull it was refitted from: the last good estimate may come from a
+        # window straddling the change, fitted partly on these very data
+        yardstick = replace(last_good, parameters=dict(last_good.parameters, **held))
+        reason = undetermined or self._distrust(config, structure, estimate, dataset, yardstick)
         if reason:
             record.conditions["too_little_excitation" if undetermined else "implausible_estimate"] = (
                 f"gain refit on the {dataset.duration:.0f} s since the change: {reason}; keeping the last good estimate"

@@ -126,6 +126,21 @@ def test_a_warm_start_with_a_long_rudder_lead_is_fitted_before_it_is_judged():
     assert unpolished.parameters["T1"] < 1.0  # the regression start's basin
 
 
+def test_time_constants_on_the_fold_are_not_published_as_known():
+    """``bench vessels`` seed 619072864: a USV whose rudder lead outruns its pole (T1 1.26 s, T2
+    0.33 s, T3 2.27 s) on legs. Searches ended on the fold T1 = T2 = 0.68 s, where only their sum and
+    product are determined, and T1 was published OK with +- 1 % (48 % off). The fit now says
+    repeated_time_constants with infinite errors, and the online core keeps no such estimate."""
+    identifier, truth = _fed_identifier(619072864, 150.0)
+    window, config = identifier.window_dataset(150.0), identifier.config
+    estimate = make_estimator(config.method).fit(config.structure(), window)
+    assert "repeated_time_constants" in estimate.flags
+    assert estimate.parameters["T1"] == pytest.approx(estimate.parameters["T2"], rel=0.01)
+    assert estimate.std_errors["T1"] == estimate.std_errors["T2"] == float("inf")
+    record = identifier.refit(150.0)
+    assert not record.new_estimate and "repeated_time_constants" in record.conditions["poor_fit"]
+
+
 def test_ship_configuration_follows_the_hull():
     ship = random_vessel(np.random.default_rng(5), "ship")
     config = vessels.config_for(ship)

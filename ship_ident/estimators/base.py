@@ -131,7 +131,7 @@ def loose_parameters(parameters: dict, std_errors: dict, limits: dict) -> tuple[
     loose = {name: r for name, r in relative.items() if not r <= limits[name]}
     figures = ", ".join(
         f"{name} {parameters[name]:.4g} +- {std_errors.get(name, np.inf):.2g} "
-        f"({100 * r:.0f} %, need <= {100 * limits[name]:.0f} %)"
+        f"({100 * r:.0f} %, need <= {100 * limits[name]:g} %)"
         for name, r in loose.items()
     )
     return list(loose), figures

@@ -428,10 +428,15 @@ class OutputError(Estimator):
         # the interval states taken from the data (yaw acceleration 0) suit a hull whose rudder
         # lead T3 is small, and a ship's T3 of 10 s put its own good estimate 170 times the noise
         # away, behind a regression start at T1 = 0.01 s (bench vessels seed 3602010556)
-        own = len(guesses) - len(starts)
-        costs = list(np.sum(residuals(points, substeps, [w for w, _ in weighings]) ** 2, axis=1))
-        for i in range(0 if explore else own if self.explore else len(points), len(points)):
-            points[i], costs[i] = polished(points[i], weighings[i][0])
+        if explore:
+            first_polished = 0
+        else:
+            first_polished = len(guesses) - len(starts) if self.explore else len(points)
+        plain = points[:first_polished]
+        costs = list(np.sum(residuals(plain, substeps, [w for w, _ in weighings]) ** 2, axis=1)) if plain else []
+        for i in range(first_polished, len(points)):
+            points[i], cost = polished(points[i], weighings[i][0])
+            costs.append(cost)
         robust = np.ones(2 * dataset.n_samples)
         best = int(np.argmin(costs + dataset.n_samples * np.array([d for _, d in weighings])))
         x0, weigh = points[best], weighings[best][0]

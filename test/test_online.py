@@ -492,23 +492,6 @@ def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
     assert published([0.10, 0.114] * 10 + [0.10])["K"] > 0.005
 
 
-def test_t1_is_published_with_the_valley_s_error_when_t2_or_t3_cannot_be_told_from_zero():
-    """bench vessels seed 128754784: T1 1.00 +- 0.043 s with T2 0.089 +- 0.07 s and T3 0.29 +- 0.097 s
-    (truth T1 1.15 s): T2's 95 % interval reaches zero, the window sees a first-order response and
-    T1 slides with T2 and T3; T1 is published with their joint error (13 %, not trusted as OK).
-    A window that determines T2 keeps T1's own error, whatever T3's (seed 001's hull: T3 0.03 +- 0.02 s)."""
-    from ship_ident.online import first_order_valley
-
-    parameters = {"K": 0.153, "T1": 0.998, "T2": 0.0887, "T3": 0.29}
-    errors = {"K": 0.001, "T1": 0.043, "T2": 0.07, "T3": 0.097}
-    valley = first_order_valley(parameters, errors)
-    assert valley["T1"] == pytest.approx(math.sqrt(0.043**2 + 0.07**2 + 0.097**2))
-    assert {k: v for k, v in valley.items() if k != "T1"} == {k: v for k, v in errors.items() if k != "T1"}
-    determined = dict(errors, T2=0.02, T3=0.2)
-    assert first_order_valley(parameters, determined) == determined
-    assert first_order_valley({"K": 0.1, "T": 5.0}, {"K": 0.001, "T": 0.1}) == {"K": 0.001, "T": 0.1}
-
-
 @pytest.mark.slow
 def test_a_well_determined_window_is_used_whatever_its_yaw_rate_spread():
     """Random rudder steps of at most 3 deg: a yaw-rate spread of 3-4 noise levels (the old rule

@@ -232,6 +232,15 @@ class OutputError(Estimator):
             starts = (structure.neutral_effect_start(bare),)
         return self._refine(structure, dataset, first, tuple(starts), explore)
 
+    def fit_held(
+        self, structure: Structure, dataset: Dataset, estimate: Estimate, start: dict, held: tuple
+    ) -> Estimate:
+        """Minimise the free-run error from ``start`` (``estimate``'s parameters moved) with the
+        parameters named in ``held`` fixed at their values there: one point of the cost's profile
+        over them (how far the others move when those are set elsewhere)."""
+        first = replace(estimate, parameters=dict(estimate.parameters, **start))
+        return self._refine(structure, dataset, first, (), explore=False, held=held)
+
     def intervals(self, dataset: Dataset) -> tuple:
         """Shooting intervals: each restarts the free run from its own estimated state."""
         return shooting_intervals(dataset.segments, int(round(self.shooting_s / dataset.sample_time)))
@@ -306,16 +315,19 @@ class OutputError(Estimator):
         return out
 
     def _refine(
-        self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple, explore: bool
+        self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple, explore: bool, held: tuple = ()
     ) -> Estimate:
         """Minimise the free-run error from ``first`` (the regression fit, and its conservative
         variant) or from any of ``starts``, whichever simulates closest to the data; ``explore``:
         also from a range of time constants, every start's gain, rudder offset and states polished
-        first (a cold fit; a warm one, from an estimate of a nearby window, needs neither)."""
+        first (a cold fit; a warm one, from an estimate of a nearby window, needs neither); the
+        parameters named in ``held`` stay at ``first``'s values."""
         names = structure.free_names
         p = len(names)
         lower, upper = structure.bounds(names, dataset)
         params0 = structure.clip_to_bounds(first.parameters)
+        for name in held:  # both bounds at the value: the search's projection keeps it there
+            lower[names.index(name)] = upper[names.index(name)] = params0[name]
         h = dataset.sample_time
         s_psi = dataset.noise_std("heading")
         s_r = dataset.noise_std("yaw_rate")

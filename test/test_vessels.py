@@ -110,6 +110,21 @@ def test_a_slow_ship_search_crawling_along_its_valley_goes_on_to_the_optimum():
     assert estimate.parameters["T1"] == pytest.approx(truth["T1"], rel=0.02)
 
 
+def test_a_slow_ship_is_fitted_cold_from_a_regression_start_that_missed_it():
+    """``bench vessels`` seed 315185517: a ship (K 0.103 1/s, T1 64 s, T2 8.2 s) in the mixed
+    manoeuvre, its first 2000 s. The regression start has complex time constants (T1 0.04 s), and
+    the starts at slow time constants lost: their gain was polished together with the rudder offset,
+    whose column at a gain 15 times too small is tiny, so the step sent the offset to its bound and
+    was refused. Every start-up refit of 2000 s was refused (poor_fit, cost 120 times the noise).
+    The gain is now polished first, and the cold fit finds the ship."""
+    identifier, truth = _fed_identifier(315185517, 2000.0, whole=True)
+    window, config = identifier.window_dataset(2000.0), identifier.config
+    estimate = make_estimator(config.method).fit(config.structure(), window)
+    assert estimate.info["cost_ratio"] < 1.0 and "oe_not_converged" not in estimate.flags
+    assert estimate.parameters["K"] == pytest.approx(truth["K"], rel=0.02)
+    assert estimate.parameters["T1"] == pytest.approx(truth["T1"], rel=0.03)
+
+
 def test_a_warm_start_with_a_long_rudder_lead_is_fitted_before_it_is_judged():
     """``bench vessels`` seed 3602010556: a ship (T1 29 s) on legs whose last good estimate had
     T2 7.9 s and T3 10.3 s. Started from the data's interval states (yaw acceleration 0), that

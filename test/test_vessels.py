@@ -125,6 +125,21 @@ def test_a_slow_ship_is_fitted_cold_from_a_regression_start_that_missed_it():
     assert estimate.parameters["T1"] == pytest.approx(truth["T1"], rel=0.03)
 
 
+def test_a_search_at_the_valley_foot_is_carried_up_the_valley_with_t2_held():
+    """``bench vessels`` seed 1753784558: a ship (T1 21 s, T2 2.4 s, T3 2.9 s) in 20/20 zigzags at half
+    the noise. Its cold search started with T2 near zero and crawled up the T2 = T3 valley for 90
+    iterations, ending oe_not_converged at T2 0.1 s: 94 of 96 well-excited refits refused. Each
+    variant along the valley is now searched with T2 held, the gain, T1 and alpha following it, and
+    the search converges at the optimum."""
+    identifier, truth = _fed_identifier(1753784558, 800.0, whole=True)
+    window, config = identifier.window_dataset(800.0), identifier.config
+    estimate = make_estimator(config.method).fit(config.structure(), window)
+    assert "oe_not_converged" not in estimate.flags
+    assert estimate.parameters["K"] == pytest.approx(truth["K"], rel=0.01)
+    assert estimate.parameters["T1"] == pytest.approx(truth["T1"], rel=0.02)
+    assert estimate.parameters["T2"] == pytest.approx(truth["T2"], rel=0.15)
+
+
 def test_a_warm_start_with_a_long_rudder_lead_is_fitted_before_it_is_judged():
     """``bench vessels`` seed 3602010556: a ship (T1 29 s) on legs whose last good estimate had
     T2 7.9 s and T3 10.3 s. Started from the data's interval states (yaw acceleration 0), that

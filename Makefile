@@ -22,10 +22,10 @@ lint: $(STAMP)
 	$(PY) -m ruff format --check ship_ident test
 
 test: lint
-	$(PY) -m pytest -n 2 -q -rs test
+	$(PY) -m pytest -n 2 --maxschedchunk 1 -q -rs test
 
 test-fast: lint
-	$(PY) -m pytest -n 2 -q -rs -m "not slow" test
+	$(PY) -m pytest -n 2 --maxschedchunk 1 -q -rs -m "not slow" test
 
 demo: $(STAMP)
 	$(PY) -m ship_ident.demo

@@ -16,6 +16,42 @@ from ship_ident.simulator import simulate  # noqa: E402
 
 SHIP_IDENT = Path(sys.executable).parent / "ship-ident"
 
+# Modules holding the longest tests (measured on 2 cores: the soak 100 s of paced DDS, the online
+# core's change tests 30-50 s, the node's 15-60 s), run first and each kept whole: with
+# ``pytest -n 2 --maxschedchunk 1`` (make test) each worker takes the next test when it is free, so
+# the short tests come last and the two workers end together. The soak runs beside the online
+# core's tests (compute), not beside the node's (paced by their own clocks). Within a module its
+# slow tests come first; its module-scoped fixtures are built at most once per worker.
+LONGEST_FIRST = (
+    "test_soak.py",
+    "test_online.py",
+    "test_node.py",
+    "test_bench.py",
+    "test_colcon.py",
+    "test_peers.py",
+    "test_hidden_effects.py",
+    "test_online_diagnosis.py",
+    "test_cli.py",
+    "test_vessels.py",
+    "test_fleet.py",
+    "test_diagnose.py",
+    "test_replay.py",
+)
+
+
+def pytest_collection_modifyitems(items):
+    """Longest modules first (LONGEST_FIRST, then the others as collected), slow tests first in each."""
+    first_seen = {}
+    for index, item in enumerate(items):
+        first_seen.setdefault(item.path.name, index)
+
+    def rank(item):
+        name = item.path.name
+        module = LONGEST_FIRST.index(name) if name in LONGEST_FIRST else len(LONGEST_FIRST)
+        return module, first_seen[name], item.get_closest_marker("slow") is None
+
+    items.sort(key=rank)
+
 
 @pytest.fixture(scope="session")
 def ship_ident_cli():

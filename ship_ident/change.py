@@ -17,7 +17,9 @@ block itself has already bent towards a new response) and compared with
 that model's level: above ``ratio`` times it on ``CONFIRMATIONS`` refits in
 a row, the vessel has changed. A large change shows sooner: the newest
 ``short`` s (one refit period), run with the model of the refit before them,
-above SHORT_RATIO_FACTOR ``ratio`` times the level declare it at once. Where it changed is found in the newest
+above SHORT_RATIO_FACTOR ``ratio`` times the level declare it at once; between refits this quick
+test alone runs several times per refit period (``quick_test``), so that a change shows within a
+fraction of one. Where it changed is found in the newest
 2 ``length`` s of that free run: the split of greatest likelihood for a step
 in the error's variance; the window then restarts there.
 
@@ -170,13 +172,30 @@ class ChangeDetector:
             return ratio, None
         if self.short_votes >= CONFIRMATIONS:
             ratio = max(ratio, short)
+        return ratio, self._declare(structure, dataset, reference)
+
+    def quick_test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
+        """The quick test alone, between refits (the newest ``short`` s above SHORT_RATIO_FACTOR
+        ``ratio`` times the usual level): (its ratio, time (s) the vessel changed or None). The
+        votes of the full test are left as they are: its blocks would barely move between calls."""
+        if not self.ratio:
+            return math.nan, None
+        short = self._short_ratio(structure, dataset)
+        if not short > SHORT_RATIO_FACTOR * self.ratio:
+            return short, None
+        return short, self._declare(structure, dataset, self._reference(float(dataset.time[-1]), drop=False))
+
+    def _declare(self, structure: Structure, dataset: Dataset, reference) -> float:
+        """A change against ``reference``: the references are forgotten, its parameters kept as
+        ``base``, and the time (s) the error stepped up in the newest 2 ``length`` s is returned."""
         _, params, level = reference
         self.forget()
         self.base = params
-        a = max(start, stop - 2 * n)
+        start, stop = dataset.segments[-1]
+        a = max(start, stop - 2 * int(round(self.length / dataset.sample_time)))
         _, r = structure.simulate(params, dataset.slice(a, stop))
         squared = np.minimum((r - dataset.yaw_rate[a:stop]) ** 2, 100 * self.ratio * level)
-        return ratio, float(dataset.time[a + variance_change_point(squared)])
+        return float(dataset.time[a + variance_change_point(squared)])
 
 
 def gain_shifted(structure: Structure, params: dict, dataset: Dataset) -> bool:

@@ -52,12 +52,14 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 from .estimate_log import EstimateLog
 from .io import FLOAT64, IMU, Sample, imu_samples
 from .jsonio import dumps_json
-from .online import CONDITION_LEVELS, OnlineIdentifier
+from .online import CONDITION_LEVELS, WATCHES_PER_REFIT, OnlineIdentifier
 from .online_config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
 from .online_diagnosis import MIN_WINDOW_S, DiagnosisWorker, OnlineDiagnosis
 
 NODE_NAME = "ship_ident"
-TICKS_PER_REFIT = 5  # the schedule is checked this many times per refit period
+# The schedule is checked this many times per refit period: twice per watch for a change between
+# refits (and per gain refit while following one), so that a timer's jitter never skips one.
+TICKS_PER_REFIT = 2 * WATCHES_PER_REFIT
 
 RELIABILITY = {
     name: getattr(ReliabilityPolicy, name.upper()) for name in spec(NodeSettings, "qos_reliability").options()
@@ -124,6 +126,7 @@ class IdentifierNode(Node):
         self._auto_effects = None  # effects auto-add asked for, set from the executor thread
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="refit")
         self._running = None  # Future of the refit in progress
+        self._watching = None  # Future of the change watch between refits (queued refits wait for it)
         self._overruns = 0  # refits skipped since the last published record
         self._overrun_lock = threading.Lock()
         self._callback_errors = 0
@@ -230,6 +233,8 @@ class IdentifierNode(Node):
                 self.get_logger().error(f"auto-add could not set effects {list(effects)}: {result.reason}")
         now = self._now()
         if not self.identifier.due(now):
+            if all(job is None or job.done() for job in (self._running, self._watching)):
+                self._watching = self._worker.submit(self._watch, now)
             return
         if self._running is not None and not self._running.done():
             self.identifier.skip(now)
@@ -241,6 +246,17 @@ class IdentifierNode(Node):
         except Exception as exc:  # a graph query must never stop the node
             self._report_callback_error(exc)
         self._running = self._worker.submit(self._refit, now)
+
+    def _watch(self, now: float) -> None:
+        """Worker thread: between refits, the quick change test (``OnlineIdentifier.watch``, rate
+        limited there); a change found is refitted and published at once."""
+        try:
+            changed = self.identifier.watch(now)
+        except Exception as exc:  # never raised: reported as a refit failure would be
+            self.get_logger().error(f"change watch failed: {type(exc).__name__}: {exc}")
+            return
+        if changed:
+            self._refit(now)
 
     def _refit(self, now: float) -> None:
         """Worker thread: refit and publish; any failure is reported, never raised."""

@@ -57,9 +57,9 @@ from .online_config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineCon
 from .online_diagnosis import MIN_WINDOW_S, DiagnosisWorker, OnlineDiagnosis
 
 NODE_NAME = "ship_ident"
-# The schedule is checked this many times per refit period: twice per watch for a change between
-# refits (and per gain refit while following one), so that a timer's jitter never skips one.
-TICKS_PER_REFIT = 2 * WATCHES_PER_REFIT
+# The schedule is checked this many times per refit period: once per watch for a change between
+# refits (and per gain refit while following one; both on a grid, so a late tick skips none).
+TICKS_PER_REFIT = WATCHES_PER_REFIT
 
 RELIABILITY = {
     name: getattr(ReliabilityPolicy, name.upper()) for name in spec(NodeSettings, "qos_reliability").options()

@@ -333,7 +333,8 @@ class OnlineIdentifier:
                 and now >= self._next_watch
             ):
                 return False
-            self._next_watch = now + config.refit_period / WATCHES_PER_REFIT
+            step = config.refit_period / WATCHES_PER_REFIT  # on a grid: a timer's jitter skips none
+            self._next_watch = self._next_watch + step if now - self._next_watch < step else now + step
             oldest = max(now - min(2 * config.change_test_length, config.window_length), self._window_floor)
             series = {role: _as_array(self._window[role]) for role in ROLES}
         try:

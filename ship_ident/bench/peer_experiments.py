@@ -194,12 +194,12 @@ def tracking(quick: bool = False, maneuver: str = "random") -> dict:
         out["compute_seconds"][method] = compute
     for memory in (window, window / 3):
         progress(f"peers tracking ({maneuver}): rls, memory {memory:.0f} s")
-        _, times, ks, _ = RecursiveLeastSquares(memory).run(data)
+        _, times, ks, _ = RecursiveLeastSquares(memory).run(data, record_every=1)
         row(f"rls (memory {memory:.0f} s)", times, ks)
     start = ukf_start(data)
     for drift in (1e-4, 1e-3, 1e-2):
         progress(f"peers tracking ({maneuver}): ukf, drift {drift:g}")
-        _, times, ks, _ = ParameterUKF(drift).run(data, start)
+        _, times, ks, _ = ParameterUKF(drift).run(data, start, record_every=1)
         row(f"ukf (drift {drift:g}/sample)", times, ks)
     return out
 

@@ -34,7 +34,7 @@ grid of memories and drifts, every setting reported. Recovery: seconds from
 the change until K stays within 5 % of the new truth to the end of the run,
 read at each K published (ours: the K in force from one record to the next,
 every refit period, and every tenth of one while the gain follows a change;
-RLS and the UKF: every tenth sample, 1 s).
+RLS and the UKF: every sample).
 
 Speed: time per refit (ours: the online refit, warm-started, as on board;
 FROLS and the dual: a fit of one window) or per sample (RLS, UKF), and the

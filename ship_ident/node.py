@@ -3,7 +3,8 @@
 A thin adapter around ``online.OnlineIdentifier``. Inputs (std_msgs/Float64,
 SI, NED; or a sensor_msgs/Imu in ENU for heading and yaw rate) are stamped on
 arrival with the node's clock, so ``use_sim_time`` with ``/clock`` works. A
-timer checks the refit schedule and hands each refit to one worker thread;
+timer checks the refit schedule and hands each refit to one worker thread
+(between refits, the quick change test: ``OnlineIdentifier.watch``);
 callbacks never wait for a fit, and a refit still running when the next is
 due is skipped and reported. Outputs: ``~/parameters``
 (Float64MultiArray, names in ``layout.dim[0].label``), ``~/estimate`` (JSON
@@ -252,7 +253,7 @@ class IdentifierNode(Node):
         limited there); a change found is refitted and published at once."""
         try:
             changed = self.identifier.watch(now)
-        except Exception as exc:  # never raised: reported as a refit failure would be
+        except Exception as exc:  # a watch must never stop the node
             self.get_logger().error(f"change watch failed: {type(exc).__name__}: {exc}")
             return
         if changed:

@@ -93,7 +93,7 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
 def test_a_change_found_between_refits_is_followed_by_the_node(env, domain_id, tmp_path):
     """Seed 001's vessel on random rudder steps loses 30 % of K (T1 +30 %) at 240 s, played at 5x:
     the node's watch between refits finds the change (before the refit 15 s on), its gain refits
-    are published every tenth of a refit period (0.5 s), and the K published at the end is within
+    are published at every tick of the node's timer (1 s), and the K published at the end is within
     5 % of the new value."""
     change = 240.0
     sim = simulate(
@@ -116,7 +116,7 @@ def test_a_change_found_between_refits_is_followed_by_the_node(env, domain_id, t
     following = [e for e in listener.estimates if "vessel_changed" in e["conditions"]]
     assert not [e for e in listener.estimates if e["stamp"] < change and "vessel_changed" in e["conditions"]]
     assert following and following[0]["stamp"] < change + 15.0
-    assert np.median(np.diff([e["stamp"] for e in following])) == pytest.approx(0.5, abs=0.15)
+    assert np.median(np.diff([e["stamp"] for e in following])) <= 1.15  # the node's ticks: a fifth of a period
     assert final_estimate(listener)["parameters"]["K"] == pytest.approx(sim.info["truth_after"]["K"], rel=0.05)
 
 

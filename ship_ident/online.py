@@ -87,6 +87,11 @@ FREE_RUN_TOLERANCE = 1.25  # a new estimate's free run may miss the window at mo
 GAIN_FITS = (("K", "T", "T1"), ("K",))
 GAIN_FIT_SPAN = 1.5
 MIN_GAIN_SAMPLES = 20  # new samples needed for the gain refit after a change
+# Between refits the newest data are watched for a change (the change detector's quick test), and
+# while the new data after one are shorter than min_window_length the gain follow refits, this many
+# times per refit period: a gain refit costs a few ms, and K is published as soon as the new data
+# determine it rather than at the next scheduled refit.
+WATCHES_PER_REFIT = 10
 SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published uncertainty
 SCATTER_REWEIGHTINGS = 4  # least-squares passes of the scatter fit (EstimateScatter)
 # A window is full when its resampled data span window_length within this many sample times: the
@@ -198,6 +203,7 @@ class OnlineIdentifier:
         self._newest = {role: -math.inf for role in ROLES}  # s, last accepted stamp per role
         self._latest_time = -math.inf  # s, newest stamp or clock reading seen
         self._next_due: float | None = None
+        self._next_watch = -math.inf  # s: the next quick change test between refits
         self.counts = {"accepted": 0, **{r: 0 for r in REJECTIONS}, "clock_jumps": 0}
         self._reported = dict(self.counts)
         self._last_jump = 0.0
@@ -294,11 +300,52 @@ class OnlineIdentifier:
             self._advance_schedule(now)
 
     def _advance_schedule(self, now: float) -> None:
+        """The next refit one period on (a refit period; WATCHES_PER_REFIT times faster while the
+        gain follows a change); a refit off the schedule (a change just found) brings it no later
+        than one period from ``now``."""
         period = self._config.refit_period
+        self._next_watch = now + period / WATCHES_PER_REFIT
+        if self._following(now):
+            period /= WATCHES_PER_REFIT
         if self._next_due is None or now - self._next_due >= period:
             self._next_due = now + period
+        elif now < self._next_due:
+            self._next_due = min(self._next_due, now + period)
         else:
             self._next_due += period
+
+    def _following(self, now: float) -> bool:
+        """Whether the gain follows a change at clock time ``now`` (s): one was found, and the data
+        since it span less than ``min_window_length``."""
+        return self._change_note is not None and now - self._window_floor < self._config.min_window_length
+
+    def watch(self, now: float) -> bool:
+        """Between refits, at most WATCHES_PER_REFIT times per refit period: whether the newest data
+        show a change (the change detector's quick test on the newest 2 ``change_test_length`` s, with
+        an accepted estimate in force and no change being followed). A change found restarts the
+        window where it happened and makes a refit due at once (call ``refit(now)``)."""
+        with self._lock:
+            config = self._config
+            if not (
+                config.change_ratio
+                and self._last_good is not None
+                and self._change_note is None
+                and now >= self._next_watch
+            ):
+                return False
+            step = config.refit_period / WATCHES_PER_REFIT  # on a grid: a timer's jitter skips none
+            self._next_watch = self._next_watch + step if now - self._next_watch < step else now + step
+            oldest = max(now - min(2 * config.change_test_length, config.window_length), self._window_floor)
+            series = {role: _as_array(self._window[role]) for role in ROLES}
+        try:
+            dataset = _resample(config, {role: s[s[:, 0] >= oldest] for role, s in series.items()})
+            ratio, changed_at = self._change.quick_test(config.structure(), dataset)
+        except (DataError, StructureError, ValueError):
+            return False
+        if changed_at is None:
+            return False
+        self._declare_change(config, now, ratio, changed_at)
+        return True
 
     # --- refit -----------------------------------------------------------
     def refit(self, now: float) -> RefitRecord:
@@ -592,6 +639,12 @@ class OnlineIdentifier:
             return dataset
         if changed_at is None:
             return dataset
+        record.conditions["vessel_changed"] = self._declare_change(config, record.time, ratio, changed_at)
+        return dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
+
+    def _declare_change(self, config, now: float, ratio: float, changed_at: float) -> str:
+        """Restart the window at ``changed_at`` (s), follow the gain from the next refit, due within
+        a follow period of ``now`` (s); returns the vessel_changed sentence."""
         note = (
             f"the newest model fitted before the newest data (the last {_short_test(config):g} or "
             f"{config.change_test_length:g} s) mispredicts them "
@@ -603,8 +656,9 @@ class OnlineIdentifier:
         with self._lock:
             self._window_floor, self._change_note = changed_at, note
             self._scatter.forget()  # the new response's estimates scatter about other values
-        record.conditions["vessel_changed"] = note
-        return dataset.slice(int(np.searchsorted(dataset.time, changed_at)), dataset.n_samples)
+            if self._next_due is not None:
+                self._next_due = min(self._next_due, now + config.refit_period / WATCHES_PER_REFIT)
+        return note
 
     @staticmethod
     def _predict(config, structure, params, dataset) -> tuple[float, float]:
@@ -783,12 +837,13 @@ def run_schedule(identifier: OnlineIdentifier, samples, diagnosis=None):
     """Feed time-ordered samples with their own stamps as the clock; yield each refit's record.
 
     This is the node's loop with the bag's time for the node's clock: a refit
-    due at a sample's time runs on everything that arrived before it.
+    due at a sample's time, or one a change found between refits calls for
+    (``watch``), runs on everything that arrived before it.
     ``diagnosis`` (an ``online_diagnosis.OnlineDiagnosis``) runs on the window after each refit
     when due; an effect it adds or removes by itself takes effect from the next refit.
     """
     for sample in samples:
-        if identifier.due(sample.time):
+        if identifier.due(sample.time) or identifier.watch(sample.time):
             record = identifier.refit(sample.time)
             if diagnosis is not None:
                 effects = diagnosis.after_refit(record, identifier)

@@ -90,6 +90,36 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
         assert spread < {"K": 0.1, "T1": 0.2}[name] * final["parameters"][name]  # and those errors are small
 
 
+def test_a_change_found_between_refits_is_followed_by_the_node(env, domain_id, tmp_path):
+    """Seed 001's vessel on random rudder steps loses 30 % of K (T1 +30 %) at 240 s, played at 5x:
+    the node's watch between refits finds the change (before the refit 15 s on), its gain refits
+    are published at every tick of the node's timer (1 s), and the K published at the end is within
+    5 % of the new value."""
+    change = 240.0
+    sim = simulate(
+        "random", "seed001", duration=280.0, seed=31, change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397})
+    )
+    path = tmp_path / "changed.mcap"
+    write_simulation(sim, path, "mcap")
+    node = node_process(env)
+    listener = Listener(domain_id)
+    play = start_play(env, path, 5.0, stderr=subprocess.PIPE, text=True)
+    try:
+        while play.poll() is None:
+            listener.spin(0.2)
+        listener.spin(1.5)
+        assert play.returncode == 0, play.stderr.read()
+        assert node.poll() is None
+    finally:
+        code, log = shut_down(node, listener, play)
+    assert code == 0, log
+    following = [e for e in listener.estimates if "vessel_changed" in e["conditions"]]
+    assert not [e for e in listener.estimates if e["stamp"] < change and "vessel_changed" in e["conditions"]]
+    assert following and following[0]["stamp"] < change + 15.0
+    assert np.median(np.diff([e["stamp"] for e in following])) <= 1.15  # the node's ticks: a fifth of a period
+    assert final_estimate(listener)["parameters"]["K"] == pytest.approx(sim.info["truth_after"]["K"], rel=0.05)
+
+
 def test_effects_change_at_run_time(env, domain_id, bag):
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient

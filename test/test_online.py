@@ -12,7 +12,7 @@ from ship_ident.change import variance_change_point
 from ship_ident.estimate_log import EstimateLog
 from ship_ident.io import Sample
 from ship_ident.metrics import noise_limited_correlation
-from ship_ident.online import OnlineIdentifier, run_schedule
+from ship_ident.online import WATCHES_PER_REFIT, OnlineIdentifier, run_schedule
 from ship_ident.online_config import ConfigError, OnlineConfig
 from ship_ident.simulator import Noise, random_vessel, simulate
 
@@ -179,9 +179,10 @@ def k_trace(records):
 
 
 def settled_after(times, ks, truth, since):
-    """First refit time after ``since`` from which K stays within 5 % of ``truth``."""
-    outside = times[(times > since) & (np.abs(ks / truth - 1) > 0.05)]
-    return outside.max() + 5.0 if len(outside) else since
+    """Time of the first record after ``since`` from which K stays within 5 % of ``truth``."""
+    from ship_ident.bench.peers import recovery_time
+
+    return since + recovery_time(times, ks, since, truth)
 
 
 @pytest.mark.slow
@@ -555,6 +556,32 @@ def test_a_changed_vessel_is_followed_within_10_s(maneuver):
     assert alarms and change < alarms[0] <= change + 10.0
     times, ks = k_trace(records)
     assert recovery_time(times, ks, change, sim.info["truth_after"]["K"]) <= 10.0
+
+
+@pytest.mark.slow
+def test_a_change_found_between_refits_is_followed_every_tenth_of_a_refit_period():
+    """bench peers --quick's random record: seed 001's vessel loses 30 % of K (T1 +30 %) at 240 s
+    with the rudder amidships until 247.8 s. The quick change test, run between refits, finds it
+    before the next scheduled refit (255 s), and the gain is refitted every tenth of a refit
+    period from then on: K is back within 5 % of the new value 11 s after the change (on the
+    refit period alone, change found and K refitted at 255 s: 15 s)."""
+    from ship_ident.bench.peers import dataset_samples, recovery_time
+
+    change, config = 240.0, OnlineConfig()
+    sim = simulate(
+        "random", "seed001", duration=2 * change, seed=31, change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397})
+    )
+    records = list(run_schedule(OnlineIdentifier(config), dataset_samples(sim.dataset)))
+    following = [r.time for r in records if "vessel_changed" in r.conditions]
+    assert 247.8 < following[0] < 255.0 and following[0] % config.refit_period > 0
+    cadence = np.diff(following[: 2 * WATCHES_PER_REFIT])
+    assert np.allclose(cadence, config.refit_period / WATCHES_PER_REFIT, atol=0.05)
+    assert not [r for r in records if r.time < change and "vessel_changed" in r.conditions]
+    times, ks = k_trace(records)
+    assert recovery_time(times, ks, change, sim.info["truth_after"]["K"]) <= 11.0
+    # once the new data span min_window_length the refits are back at the refit period
+    later = [r.time for r in records if r.time > following[0] + config.min_window_length + config.refit_period]
+    assert np.allclose(np.diff(later), config.refit_period, atol=0.05)
 
 
 def _losing_gain(vessel_seed: int, manoeuvre: str, noise_scale: float, seed: int, change: float):

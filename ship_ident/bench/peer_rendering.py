@@ -89,7 +89,7 @@ def plot(result: dict, plot_dir: str) -> list[str]:
 
 
 def _seconds(value: float) -> str:
-    return f"{value:.0f} s" if np.isfinite(value) else "never"
+    return f"{round(value, 1):g} s" if np.isfinite(value) else "never"
 
 
 def _best(values: dict) -> str:

@@ -31,7 +31,8 @@ Figures, all against the simulated truth:
   the change (RMS over the last two thirds of a window); the share beyond also over the
   step cases whose data after the change determine K (``determined_after_change``), the
   others listed by seed;
-* false ``vessel_changed`` per hour of steady data.
+* false ``vessel_changed`` per hour of steady data (changes declared, not the records that
+  repeat one while the gain follows it).
 
 The JSON carries each case's refits in short (``_brief``): a rejected refit is found there with
 its conditions and window bound, and replayed by the case's seed.
@@ -262,7 +263,7 @@ def summarise(cases: list[dict]) -> dict:
                 undetermined.append(case["seed"])
         elif case["refits"]:
             steady_hours += (case["refits"][-1]["time"] - case["refits"][0]["time"]) / 3600.0
-            changed += sum("vessel_changed" in r["conditions"] for r in case["refits"])
+            changed += _changes_declared(case["refits"])
     recoveries, quick_hull = np.array(recoveries, dtype=float), np.array(quick_hull, dtype=bool)
     return {
         "cases": len(cases),
@@ -312,6 +313,13 @@ def _k_trace(case: dict) -> tuple[np.ndarray, np.ndarray]:
     """Times (s) of the refits and the K (1/s) in force after each."""
     kept = [(r["time"], r["parameters"]["K"]) for r in case["refits"] if "K" in r["parameters"]]
     return np.array([t for t, _ in kept]), np.array([k for _, k in kept])
+
+
+def _changes_declared(refits: list) -> int:
+    """How many times a change was declared: records that report vessel_changed after one that
+    did not (every record while the gain follows the change repeats it, several per refit period)."""
+    flagged = ["vessel_changed" in r["conditions"] for r in refits]
+    return sum(now and not before for before, now in zip([False] + flagged, flagged))
 
 
 def _recovery(case: dict) -> tuple[float, float]:

@@ -23,7 +23,8 @@ Figures, all against the simulated truth:
   Cramer-Rao bound (``crb.py``, with the record's rudder noise) puts K within
   ``WELL_EXCITED['K']`` and T1 within ``WELL_EXCITED['T1']`` (relative std; half the
   errors the node trusts), whatever its signal-to-noise ratios; any refit there that does not give a
-  new OK estimate is rejected, and its conditions are counted;
+  new OK estimate is rejected, and its conditions are counted, and those before a full window
+  (start-up, where the node trusts half the errors);
 * after the step change: the time until the K in force is back within 5 %
   of the new truth and stays there (``peers.recovery_time``), median (also apart for
   hulls with T1 up to ``QUICK_HULL_T1``, whose target is 60 s, and for slower ones), worst,
@@ -226,7 +227,7 @@ def summarise(cases: list[dict]) -> dict:
     covered = {p: [] for p in PARAMETERS}
     off = {"K": [], "T1": []}
     worst = {"K": (0.0, None), "T1": (0.0, None)}
-    excited = rejected = 0
+    excited = rejected = rejected_start_up = 0
     reasons: dict[str, int] = {}
     recoveries, errors_before, beyond, quick_hull, undetermined, beyond_determined = [], [], [], [], [], []
     changed, steady_hours = 0, 0.0
@@ -248,6 +249,7 @@ def summarise(cases: list[dict]) -> dict:
                 excited += 1
                 if not published:
                     rejected += 1
+                    rejected_start_up += refit["time"] < case["window_s"]  # no full window yet
                     for c in refit["conditions"] or ["new estimate not OK"]:
                         reasons[c] = reasons.get(c, 0) + 1
         if case["step"]:
@@ -281,6 +283,7 @@ def summarise(cases: list[dict]) -> dict:
         "well_excited": {
             "refits": excited,
             "rejected": rejected,
+            "rejected_start_up": rejected_start_up,
             "share_rejected": rejected / excited if excited else math.nan,
             "reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
         },
@@ -457,7 +460,8 @@ def render(result: dict) -> str:
     lines.append(
         f"well-excited windows (CRB relative std K <= {100 * crb['K']:.0f} %, T1 <= "
         f"{100 * crb['T1']:.0f} %) on steady vessels: {we['rejected']} of {we['refits']} refits "
-        f"rejected ({100 * we['share_rejected']:.1f} %, target <= 5 %); conditions: "
+        f"rejected ({100 * we['share_rejected']:.1f} %, target <= 5 %), {we['rejected_start_up']} of them "
+        f"before a full window (start-up: trusted within half the errors); conditions: "
         + (", ".join(f"{c} {n}" for c, n in we["reasons"].items()) or "-")
     )
     rc = s["recovery"]

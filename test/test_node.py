@@ -46,15 +46,12 @@ def node_process(env, *parameters):
     )
 
 
-def final_estimate(listener):
-    return next(e for e in reversed(listener.estimates) if e["new_estimate"])
-
-
-def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
-    path, truth = bag
+def played_to_the_end(env, domain_id, path, rate: float):
+    """The node (defaults) and a listener while ``path`` plays at ``rate`` to its end and 1.5 s on;
+    the node still ran and shut down cleanly. The listener."""
     node = node_process(env)
     listener = Listener(domain_id)
-    play = start_play(env, path, 10.0, stderr=subprocess.PIPE, text=True)
+    play = start_play(env, path, rate, stderr=subprocess.PIPE, text=True)
     try:
         while play.poll() is None:
             listener.spin(0.2)
@@ -64,6 +61,16 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
     finally:
         code, log = shut_down(node, listener, play)
     assert code == 0, log
+    return listener
+
+
+def final_estimate(listener):
+    return next(e for e in reversed(listener.estimates) if e["new_estimate"])
+
+
+def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
+    path, truth = bag
+    listener = played_to_the_end(env, domain_id, path, 10.0)
     final = final_estimate(listener)
     assert final["stamp"] > 280.0 and final["status"] in ("OK", "WARN"), final["conditions"]
     assert final["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)
@@ -101,18 +108,7 @@ def test_a_change_found_between_refits_is_followed_by_the_node(env, domain_id, t
     )
     path = tmp_path / "changed.mcap"
     write_simulation(sim, path, "mcap")
-    node = node_process(env)
-    listener = Listener(domain_id)
-    play = start_play(env, path, 5.0, stderr=subprocess.PIPE, text=True)
-    try:
-        while play.poll() is None:
-            listener.spin(0.2)
-        listener.spin(1.5)
-        assert play.returncode == 0, play.stderr.read()
-        assert node.poll() is None
-    finally:
-        code, log = shut_down(node, listener, play)
-    assert code == 0, log
+    listener = played_to_the_end(env, domain_id, path, 5.0)
     following = [e for e in listener.estimates if "vessel_changed" in e["conditions"]]
     assert not [e for e in listener.estimates if e["stamp"] < change and "vessel_changed" in e["conditions"]]
     assert following and following[0]["stamp"] < change + 15.0

@@ -157,6 +157,15 @@ def bounded_levenberg_marquardt(
     return LeastSquaresResult(x=x, fun=f, jac=J, iterations=iteration, success=converged)
 
 
+def held_bounds(lower: np.ndarray, upper: np.ndarray, held: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of the bounds with each unknown of ``held`` (index -> value) at its value on both: the
+    search's projection (``bounded_levenberg_marquardt``) keeps it there."""
+    lower, upper = lower.copy(), upper.copy()
+    for index, value in held.items():
+        lower[index] = upper[index] = value
+    return lower, upper
+
+
 def _dense(a) -> np.ndarray:
     return a.toarray() if sparse.issparse(a) else a
 
@@ -325,10 +334,8 @@ class OutputError(Estimator):
         parameters named in ``held`` stay at ``first``'s values."""
         names = structure.free_names
         p = len(names)
-        lower, upper = structure.bounds(names, dataset)
         params0 = structure.clip_to_bounds(first.parameters)
-        for name in held:  # both bounds at the value: the search's projection keeps it there
-            lower[names.index(name)] = upper[names.index(name)] = params0[name]
+        lower, upper = held_bounds(*structure.bounds(names, dataset), {names.index(n): params0[n] for n in held})
         h = dataset.sample_time
         s_psi = dataset.noise_std("heading")
         s_r = dataset.noise_std("yaw_rate")
@@ -479,8 +486,7 @@ class OutputError(Estimator):
             t2 = names.index("T2")
             best, best_cost = x, float(np.sum(residual(x) ** 2))
             for point in points[1:]:
-                held_lo, held_hi = lo.copy(), hi.copy()
-                held_lo[t2] = held_hi[t2] = point[t2]
+                held_lo, held_hi = held_bounds(lo, hi, {t2: point[t2]})
                 found = bounded_levenberg_marquardt(residual, jacobian, point, held_lo, held_hi, VALLEY_HELD_ITERATIONS)
                 if found.fun @ found.fun < best_cost:
                     best, best_cost = found.x, float(found.fun @ found.fun)

@@ -476,21 +476,22 @@ class OutputError(Estimator):
             measured so)."""
             variants = self._valley_starts(names, x[:p])
             if not variants:
-                return x
+                return x, 0
             states = x[p:].copy()
             states[2::n_state] = states0[:, 2]
             points = [x] + [np.clip(np.concatenate([g, states]), lo, hi) for g in variants]
             if not self.explore:
                 substeps = max(fit_substeps(h, unpack(q)[0]) for q in points)
-                return points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))]
+                return points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))], 0
             t2 = names.index("T2")
-            best, best_cost = x, float(np.sum(residual(x) ** 2))
+            best, best_cost, iterations = x, float(np.sum(residual(x) ** 2)), 0
             for point in points[1:]:
                 held_lo, held_hi = held_bounds(lo, hi, {t2: point[t2]})
                 found = bounded_levenberg_marquardt(residual, jacobian, point, held_lo, held_hi, VALLEY_HELD_ITERATIONS)
+                iterations += found.iterations
                 if found.fun @ found.fun < best_cost:
                     best, best_cost = found.x, float(found.fun @ found.fun)
-            return best
+            return best, iterations
 
         robust = huber_weights(residual(x0), dataset.n_samples)
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
@@ -505,16 +506,11 @@ class OutputError(Estimator):
             # T2 = T3 valley from its foot: jump along it first; anywhere when exploring is on:
             # the diagnosis keeps its figures without): search on gently (a model that misses the
             # motion, residuals far above the noise, is not helped by more search)
+            start, valley_iterations = along_valley(result.x) if in_valley_foot else (result.x, 0)
             result = bounded_levenberg_marquardt(
-                residual,
-                jacobian,
-                along_valley(result.x) if in_valley_foot else result.x,
-                lo,
-                hi,
-                RESCUE_ITERATIONS_FACTOR * self.max_iterations,
-                gentle=True,
+                residual, jacobian, start, lo, hi, RESCUE_ITERATIONS_FACTOR * self.max_iterations, gentle=True
             )
-            iterations += result.iterations
+            iterations += valley_iterations + result.iterations
         params, _ = unpack(result.x)
         std = parameter_std_errors(result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(intervals))
         std_errors = {n: float(s) for n, s in zip(names, std)}

@@ -15,7 +15,7 @@ NOT_SOURCES = shutil.ignore_patterns(
     ".venv", ".git", "build", "install", "log", "__pycache__", "*.egg-info", ".pytest_cache", "out"
 )
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.node]  # builds the package and starts its node
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
 """Shared fixtures: the ``ship-ident`` command as a subprocess and a noise-free simulation."""
 
+import fcntl
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -96,3 +98,24 @@ def ship_ident_cli():
 def clean_nomoto2():
     """Noise-free nomoto2 (no effects) zigzag of the seed001 vessel, 300 s at 10 Hz."""
     return simulate("zigzag20", "seed001", effects=(), duration=300.0, noise=0.0, seed=3)
+
+
+@pytest.fixture(scope="session")
+def run_folder(tmp_path_factory, worker_id) -> Path:
+    """A folder the test workers of this run share (the run's own folder without xdist)."""
+    own = tmp_path_factory.getbasetemp()
+    return own if worker_id == "master" else own.parent
+
+
+def once_per_run(run_folder: Path, name: str, build) -> Path:
+    """``run_folder / name``, made by ``build(folder)`` in the first test worker that needs it; the
+    others wait for it under a lock and use it (a build that failed is tried again)."""
+    folder = run_folder / name
+    with open(run_folder / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (run_folder / f"{name}.built").is_file():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            build(folder)
+            (run_folder / f"{name}.built").touch()
+    return folder

@@ -1,6 +1,5 @@
 """The package builds with colcon into a ROS 2 install space whose executables start."""
 
-import fcntl
 import json
 import os
 import shutil
@@ -9,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import once_per_run
 
 PACKAGE_ROOT = Path(__file__).parents[1]
 VENV_BIN = Path(sys.executable).parent
@@ -19,31 +19,20 @@ NOT_SOURCES = shutil.ignore_patterns(
 pytestmark = [pytest.mark.slow, pytest.mark.node]  # builds the package and starts its node
 
 
+def build_workspace(root: Path) -> None:
+    """A colcon workspace in ``root`` holding a copy of the package, built with the venv's colcon."""
+    shutil.copytree(PACKAGE_ROOT, root / "src" / "ship_ident", ignore=NOT_SOURCES)
+    env = dict(os.environ, PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
+    result = subprocess.run(
+        ["colcon", "build", "--base-paths", "src"], cwd=root, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
 @pytest.fixture(scope="module")
-def workspace(tmp_path_factory, worker_id):
-    """A colcon workspace holding a copy of the package, built with the venv's colcon once per run:
-    the test workers share it (the first builds it under a lock, the others wait and use it)."""
-    shared = tmp_path_factory.getbasetemp()
-    if worker_id != "master":
-        shared = shared.parent  # the run's folder, above each worker's own
-    root = shared / "colcon_ws"
-    with open(shared / "colcon_ws.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (root / "built").is_file():
-            shutil.rmtree(root, ignore_errors=True)  # a build that failed on another worker
-            shutil.copytree(PACKAGE_ROOT, root / "src" / "ship_ident", ignore=NOT_SOURCES)
-            env = dict(os.environ, PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
-            result = subprocess.run(
-                ["colcon", "build", "--base-paths", "src"],
-                cwd=root,
-                env=env,
-                capture_output=True,
-                text=True,
-                timeout=300,
-            )
-            assert result.returncode == 0, result.stdout + result.stderr
-            (root / "built").touch()
-    return root
+def workspace(run_folder):
+    """The built workspace, once per run: the test workers share it."""
+    return once_per_run(run_folder, "colcon_ws", build_workspace)
 
 
 def run_sourced(workspace: Path, command: str) -> subprocess.CompletedProcess:

@@ -21,17 +21,18 @@ SHIP_IDENT = Path(sys.executable).parent / "ship-ident"
 # The longest tests and the modules holding them, run first: with ``pytest -n 2 --maxschedchunk 1``
 # each worker takes the next test when it is free, so the short tests come last and the two workers
 # end together. ``make test`` runs the tests that start ROS nodes (marker ``node``: soak, node,
-# colcon, onboard-steady; paced by their clocks, 15-110 s each, mostly waiting) in a pytest of their
-# own beside the others, each run in this order. Seconds on a quiet core (CPU for the computing
-# tests) in brackets; within a module its slow tests come first; its module-scoped fixtures are built
-# at most once per worker.
+# colcon, onboard-steady; paced by their clocks, 4-111 s each, mostly waiting) in a pytest of their
+# own beside the others, each run in this order. Seconds in brackets (wall for those, CPU for the
+# computing tests; measured at load average 7). Within a module its slow tests come first; its
+# module-scoped fixtures are built at most once per worker (once_per_run: once for all workers).
 LONGEST_FIRST = (
-    "test_soak.py",  # [110] 10 simulated minutes at 6x real time
-    "test_node.py::test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added",  # [~70]
-    "test_node.py::test_a_change_found_between_refits_is_followed_by_the_node",  # [~60] 280 s at 5x
-    "test_bench.py::test_onboard_steady_quick_raises_no_missing_effect_over_dds",  # [~50] 5 min at 8x
-    "test_node.py",  # [41, then 10-25 each]
-    "test_colcon.py",  # [~40] one build, three tests
+    "test_soak.py",  # [111] 10 simulated minutes at 6x real time
+    "test_node.py::test_a_change_found_between_refits_is_followed_by_the_node",  # [71] 280 s at 5x
+    "test_node.py::test_node_converges_to_truth_and_matches_replay",  # [51] 300 s at 10x, then replay
+    "test_bench.py::test_onboard_steady_quick_raises_no_missing_effect_over_dds",  # [51] 5 min at 8x
+    "test_node.py::test_diagnosis_names_a_hidden_gyro_bias_and_the_error_falls_once_it_is_added",  # [41]
+    "test_node.py",  # [18 .. 4]
+    "test_colcon.py",  # [44] one build, three tests
     "test_peers.py::test_tracking_recovers_within_a_window_and_the_peers_track",  # [27]
     "test_vessels.py::test_bench_vessels_fixed_seed_sample_against_the_truth",  # [23]
     "test_online.py::test_a_changed_vessel_restarts_the_window",  # [21]
@@ -40,15 +41,13 @@ LONGEST_FIRST = (
     "test_hidden_effects.py::test_nothing_hidden_on_a_slow_ship_is_not_a_missing_effect",  # [12]
     "test_online.py",  # [11 .. 1]
     "test_replay.py::test_kvlcc2_zigzag_uncertainty_covers_the_scatter_and_is_not_saturated",  # [11]
-    "test_cli.py::test_columns_by_name_and_synonyms_on_the_command_line",  # [9.5] subprocesses
-    "test_cli.py::test_bad_arguments_exit_2_with_one_line",  # [9]
+    "test_cli.py",  # [10, 9 ..] subprocesses; its module fixtures are shared by most of its tests
     "test_bench.py",
     "test_peers.py",
     "test_hidden_effects.py",
     "test_online_diagnosis.py",
     "test_diagnose.py",
     "test_replay.py",
-    "test_cli.py",
     "test_vessels.py",
     "test_fleet.py",
 )

@@ -69,6 +69,7 @@ def test_bench_speed_quick_json_is_one_object(capsys):
         assert all(0 < t < 60 for t in times.values()), method
 
 
+@pytest.mark.node
 def test_onboard_steady_quick_raises_no_missing_effect_over_dds():
     """The real node over DDS, five minutes of a drawn USV with nothing hidden at 8x (the 30-minute
     trips are ``bench onboard-steady``'s): its diagnoses run and none says missing_effect."""

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import once_per_run
 
 PACKAGE_ROOT = Path(__file__).parents[1]
 VENV_BIN = Path(sys.executable).parent
@@ -15,20 +16,23 @@ NOT_SOURCES = shutil.ignore_patterns(
     ".venv", ".git", "build", "install", "log", "__pycache__", "*.egg-info", ".pytest_cache", "out"
 )
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.node]  # builds the package and starts its node
 
 
-@pytest.fixture(scope="module")
-def workspace(tmp_path_factory):
-    """A colcon workspace holding a copy of the package, built with the venv's colcon."""
-    root = tmp_path_factory.mktemp("ws")
+def build_workspace(root: Path) -> None:
+    """A colcon workspace in ``root`` holding a copy of the package, built with the venv's colcon."""
     shutil.copytree(PACKAGE_ROOT, root / "src" / "ship_ident", ignore=NOT_SOURCES)
     env = dict(os.environ, PATH=f"{VENV_BIN}{os.pathsep}{os.environ.get('PATH', '')}")
     result = subprocess.run(
         ["colcon", "build", "--base-paths", "src"], cwd=root, env=env, capture_output=True, text=True, timeout=300
     )
     assert result.returncode == 0, result.stdout + result.stderr
-    return root
+
+
+@pytest.fixture(scope="module")
+def workspace(run_folder):
+    """The built workspace, once per run: the test workers share it."""
+    return once_per_run(run_folder, "colcon_ws", build_workspace)
 
 
 def run_sourced(workspace: Path, command: str) -> subprocess.CompletedProcess:

@@ -2,8 +2,10 @@
 
 import argparse
 import csv
+from pathlib import Path
 
 import pytest
+from conftest import once_per_run
 
 from ship_ident.cli import build_parser, main
 from ship_ident.commands.common import topics_from_args
@@ -17,19 +19,25 @@ pytestmark = pytest.mark.slow  # a fleet of bags, a local dask cluster
 TRUE_K = {"alpha": 0.5883, "bravo": 0.40}
 
 
-@pytest.fixture(scope="module")
-def bags(tmp_path_factory):
-    root = tmp_path_factory.mktemp("fleet")
-    paths = []
+def write_bags(root: Path) -> None:
+    """Two trips of each vessel in TRUE_K, 200 s each, in ``root / VESSEL / tripN.mcap``."""
+    count = 0
     for vessel, k in TRUE_K.items():
         (root / vessel).mkdir()
         for trip in range(2):
-            path = root / vessel / f"trip{trip}.mcap"
             write_simulation(
-                simulate("mixed", duration=200.0, seed=10 * trip + len(paths), parameters={"K": k}), path, "mcap"
+                simulate("mixed", duration=200.0, seed=10 * trip + count, parameters={"K": k}),
+                root / vessel / f"trip{trip}.mcap",
+                "mcap",
             )
-            paths.append(str(path))
-    return paths
+            count += 1
+
+
+@pytest.fixture(scope="module")
+def bags(run_folder):
+    """The fleet's bags, written once per run (the test workers share them)."""
+    root = once_per_run(run_folder, "fleet", write_bags)
+    return [str(root / vessel / f"trip{trip}.mcap") for vessel in TRUE_K for trip in range(2)]
 
 
 def fleet_args(bags, *options):
@@ -52,11 +60,14 @@ def read_table(path):
 
 
 @pytest.fixture(scope="module")
-def pool_rows(bags, tmp_path_factory):
-    out = tmp_path_factory.mktemp("pool")
-    assert replay_fleet(fleet_args(bags, "--jobs", "2", "--table", str(out / "fleet.csv")), bags) == 0
-    assert sorted(p.name for p in out.glob("drift_*.png")) == ["drift_alpha.png", "drift_bravo.png"]
-    return read_table(out / "fleet.csv")
+def pool_rows(bags, run_folder):
+    """The table of ``replay --jobs 2`` over the fleet, made once per run (the test workers share it)."""
+
+    def replay_with_a_pool(out: Path) -> None:
+        assert replay_fleet(fleet_args(bags, "--jobs", "2", "--table", str(out / "fleet.csv")), bags) == 0
+        assert sorted(p.name for p in out.glob("drift_*.png")) == ["drift_alpha.png", "drift_bravo.png"]
+
+    return read_table(once_per_run(run_folder, "pool", replay_with_a_pool) / "fleet.csv")
 
 
 def test_vessel_rules():

@@ -15,7 +15,7 @@ from ship_ident.demo import Listener, ros_environment, shut_down, start_node, st
 from ship_ident.io import write_simulation
 from ship_ident.simulator import simulate
 
-pytestmark = pytest.mark.slow  # every test here starts the node over real DDS
+pytestmark = [pytest.mark.slow, pytest.mark.node]  # every test here starts the node over real DDS
 
 _test_index = itertools.count()
 

@@ -14,7 +14,7 @@ from ship_ident.demo import Listener, shut_down, start_node
 from ship_ident.node import TICKS_PER_REFIT
 from ship_ident.simulator import simulate
 
-pytestmark = pytest.mark.slow  # ten simulated minutes at 100 Hz through the node
+pytestmark = [pytest.mark.slow, pytest.mark.node]  # ten simulated minutes at 100 Hz through the node
 
 SIM_SECONDS = 600.0  # s of simulated time
 INPUT_RATE = 100.0  # Hz on each of rudder, heading, yaw rate

@@ -514,7 +514,7 @@ class OnlineIdentifier:
             record.conditions["uncertain_estimate"] = (
                 f"the window determines {', '.join(loose)} only loosely ({figures}): "
                 + (
-                    "keeping the last good estimate, whose K is known better"
+                    f"K known better by the last good estimate; {KEEPING}"
                     if held
                     else "published with its uncertainty, not to be trusted as OK"
                 )
@@ -591,8 +591,12 @@ class OnlineIdentifier:
         )
         undetermined = "it diverged" if fit["diverged"] else loose
         # judged against the hull it was refitted from: the last good estimate may come from a
-        # window straddling the change, fitted partly on these very data
-        yardstick = replace(last_good, parameters=dict(last_good.parameters, **held))
+        # window straddling the change, fitted partly on these very data; once K has been followed
+        # on the new data, against that (each refit would otherwise jump from the old hull again and
+        # be held for the next one to confirm: every other refit refused)
+        with self._lock:
+            followed = self._last_good_window[0] >= self._window_floor
+        yardstick = last_good if followed else replace(last_good, parameters=dict(last_good.parameters, **held))
         reason = undetermined or self._distrust(config, structure, estimate, dataset, yardstick)
         if reason:
             name = "too_little_excitation" if undetermined else "implausible_estimate"

@@ -87,6 +87,14 @@ FREE_RUN_TOLERANCE = 1.25  # a new estimate's free run may miss the window at mo
 GAIN_FITS = (("K", "T", "T1"), ("K",))
 GAIN_FIT_SPAN = 1.5
 MIN_GAIN_SAMPLES = 20  # new samples needed for the gain refit after a change
+# The gain refit's free runs restart from the measured state every change_test_length s, or every
+# GAIN_BLOCK_SPAN held main time constants when that is longer: a block shorter than the response
+# leaves the gain to the fitted initial states (a ship with T1 35 s restarted every 30 s).
+GAIN_BLOCK_SPAN = 2.0
+# A full fit refused after a change (the new data do not yet determine every parameter) leaves the
+# gain followed on all the new data: its sentence then says so instead of keeping the last good one.
+KEEPING = "keeping the last good estimate"
+FOLLOWED_INSTEAD = "K refitted on the new data instead (see vessel_changed)"
 # Between refits the newest data are watched for a change (the change detector's quick test), and
 # while the new data after one are shorter than min_window_length the gain follow refits, this many
 # times per refit period: a gain refit costs a few ms, and K is published as soon as the new data
@@ -405,13 +413,24 @@ class OnlineIdentifier:
         structure = config.structure()
         if last_good is not None and self._change_note is None:
             dataset = self._test_for_change(config, structure, dataset, record)
-        if (
-            self._change_note is not None
-            and last_good is not None
-            and dataset.duration < config.min_window_length - 0.5 * config.sample_time
-        ):
+        if self._change_note is not None and last_good is not None:
+            if dataset.duration >= config.min_window_length - 0.5 * config.sample_time:
+                self._full_fit(config, structure, dataset, last_good, record)
+                if record.new_estimate or self._change_note is None:
+                    return
+                refused = dict(record.conditions)  # the full fit's refusal, then K followed instead
+            else:
+                refused = {}
             self._follow_gain(config, structure, dataset, last_good, record)
+            if record.new_estimate:
+                for name, sentence in refused.items():
+                    record.conditions[name] = sentence.replace(KEEPING, FOLLOWED_INSTEAD)
             return
+        self._full_fit(config, structure, dataset, last_good, record)
+
+    def _full_fit(self, config, structure, dataset, last_good, record: RefitRecord) -> None:
+        """Every free parameter fitted on the window's ``dataset``; published when the checks of a new
+        estimate pass."""
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.gaps:
             longest = max(b - a for a, b in dataset.gaps)
@@ -454,7 +473,7 @@ class OnlineIdentifier:
         folded = "repeated_time_constants" in estimate.flags
         undetermined = None if folded else excitation_shortfall(dataset, estimate.parameters, estimate.std_errors)
         if undetermined:
-            record.conditions["too_little_excitation"] = f"{undetermined}; keeping the last good estimate"
+            record.conditions["too_little_excitation"] = f"{undetermined}; {KEEPING}"
             return
         correlation = estimate.fit.get("r_yaw_rate", math.nan)
         best = noise_limited_correlation(dataset.yaw_rate, dataset.noise_std("yaw_rate"))
@@ -479,7 +498,7 @@ class OnlineIdentifier:
         )
         distrust = self._distrust(config, structure, published, dataset, last_good)
         if distrust:
-            record.conditions["implausible_estimate"] = f"{distrust}; keeping the last good estimate"
+            record.conditions["implausible_estimate"] = f"{distrust}; {KEEPING}"
             return
         limits = TRUSTED_RELATIVE_ERRORS
         if start_up:
@@ -495,7 +514,7 @@ class OnlineIdentifier:
             record.conditions["uncertain_estimate"] = (
                 f"the window determines {', '.join(loose)} only loosely ({figures}): "
                 + (
-                    "keeping the last good estimate, whose K is known better"
+                    f"K known better by the last good estimate; {KEEPING}"
                     if held
                     else "published with its uncertainty, not to be trusted as OK"
                 )
@@ -503,8 +522,9 @@ class OnlineIdentifier:
             if held:
                 return
         self._publish(config, structure, estimate, published, dataset, record)
-        if full:
-            self._change.calibrate(structure, estimate, dataset)  # a full window's model
+        if full:  # a full window's model, judged by its published errors (a window straddling a change
+            # fits a mixture of two hulls whose scatter the estimator's own errors do not show)
+            self._change.calibrate(structure, published, dataset)
             self._full_window_fitted = True
         with self._lock:
             self._change_note = None
@@ -526,9 +546,11 @@ class OnlineIdentifier:
             self._candidate = None
 
     def _follow_gain(self, config, structure, dataset, last_good, record) -> None:
-        """After a change, while the new data are shorter than ``min_window_length``: the first set
+        """After a change, while the new data are shorter than ``min_window_length`` or the full fits
+        on them are refused: the first set
         of GAIN_FITS they determine (K with the main time constant T1 or T, or K alone) refitted
-        on them, run free in blocks of ``change_test_length``, the other parameters held from the
+        on them, run free in blocks of ``change_test_length`` (at least GAIN_BLOCK_SPAN held time
+        constants), the other parameters held from the
         reference the change was declared against (ChangeDetector.base; the last good estimate
         without one), not from estimates of windows straddling the change (a USV's cubic damping
         bent from 0.4 to 147 by them held K 20 % high) (a free run is almost linear in K; a held
@@ -539,11 +561,12 @@ class OnlineIdentifier:
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.n_samples < MIN_GAIN_SAMPLES:
             return
-        blocks = covering_blocks(dataset, int(round(config.change_test_length / dataset.sample_time)))
         held = self._change.base or last_good.parameters
         time_constant = held.get("T1", held.get("T"))
         if dataset.duration < GAIN_FIT_SPAN * time_constant:
             return
+        block = max(config.change_test_length, GAIN_BLOCK_SPAN * time_constant)
+        blocks = covering_blocks(dataset, int(round(block / dataset.sample_time)))
         try:
             for names in GAIN_FITS:  # the most the new data determine (judged by the standard errors alone:
                 # a rudder held in a turn determines K, r = K delta, however little it moves)
@@ -568,13 +591,18 @@ class OnlineIdentifier:
         )
         undetermined = "it diverged" if fit["diverged"] else loose
         # judged against the hull it was refitted from: the last good estimate may come from a
-        # window straddling the change, fitted partly on these very data
-        yardstick = replace(last_good, parameters=dict(last_good.parameters, **held))
+        # window straddling the change, fitted partly on these very data; once K has been followed
+        # on the new data, against that (each refit would otherwise jump from the old hull again and
+        # be held for the next one to confirm: every other refit refused)
+        with self._lock:
+            followed = self._last_good_window[0] >= self._window_floor
+        yardstick = last_good if followed else replace(last_good, parameters=dict(last_good.parameters, **held))
         reason = undetermined or self._distrust(config, structure, estimate, dataset, yardstick)
         if reason:
-            record.conditions["too_little_excitation" if undetermined else "implausible_estimate"] = (
-                f"gain refit on the {dataset.duration:.0f} s since the change: {reason}; keeping the last good estimate"
-            )
+            name = "too_little_excitation" if undetermined else "implausible_estimate"
+            sentence = f"gain refit on the {dataset.duration:.0f} s since the change: {reason}; {KEEPING}"
+            full_fit = record.conditions.get(name)  # the full fit's refusal of the same kind, if any
+            record.conditions[name] = f"{full_fit.removesuffix('; ' + KEEPING)}; {sentence}" if full_fit else sentence
             return
         self._publish(config, structure, estimate, estimate, dataset, record, scatter=False)
 
@@ -651,7 +679,8 @@ class OnlineIdentifier:
             f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
             f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
             f"the window restarts at {changed_at:.1f} s, where the error stepped up (K refitted on the "
-            f"new data with the time constants held until they span {config.min_window_length:g} s)"
+            f"new data with the time constants held until they span {config.min_window_length:g} s, and while "
+            f"full fits on them are refused)"
         )
         with self._lock:
             self._window_floor, self._change_note = changed_at, note

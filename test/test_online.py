@@ -12,7 +12,7 @@ from ship_ident.change import variance_change_point
 from ship_ident.estimate_log import EstimateLog
 from ship_ident.io import Sample
 from ship_ident.metrics import noise_limited_correlation
-from ship_ident.online import WATCHES_PER_REFIT, OnlineIdentifier, run_schedule
+from ship_ident.online import FOLLOWED_INSTEAD, WATCHES_PER_REFIT, OnlineIdentifier, run_schedule
 from ship_ident.online_config import ConfigError, OnlineConfig
 from ship_ident.simulator import Noise, random_vessel, simulate
 
@@ -586,15 +586,17 @@ def test_a_change_found_between_refits_is_followed_every_tenth_of_a_refit_period
     assert np.allclose(np.diff(later), config.refit_period, atol=0.05)
 
 
-def _losing_gain(vessel_seed: int, manoeuvre: str, noise_scale: float, seed: int, change: float):
+def _losing_gain(
+    vessel_seed: int, manoeuvre: str, noise_scale: float, seed: int, change: float, duration: float | None = None
+):
     """bench vessels' vessel of ``vessel_seed`` on ``manoeuvre`` (noise scaled by ``noise_scale``),
-    losing 30 % of K as T1 grows 30 % at ``change`` s, for twice that long."""
+    losing 30 % of K as T1 grows 30 % at ``change`` s, for ``duration`` s (twice ``change``)."""
     vessel = random_vessel(np.random.default_rng(vessel_seed))
     truth = vessel.parameters
     return simulate(
         manoeuvre,
         vessel,
-        duration=2 * change,
+        duration=duration or 2 * change,
         noise=Noise().scaled(noise_scale),
         seed=seed,
         change=(change, {"K": 0.7 * truth["K"], "T1": 1.3 * truth["T1"]}),
@@ -635,6 +637,33 @@ def test_a_gain_lost_in_a_noisy_steady_turn_is_found():
     alarms = [r.time for r in records if "vessel_changed" in r.conditions]
     assert alarms and change < alarms[0] <= change + 30.0
     assert recovery_time(*k_trace(records), change, sim.info["truth_after"]["K"]) <= 30.0
+
+
+@pytest.mark.slow
+def test_the_gain_is_followed_while_full_fits_of_the_new_data_are_refused():
+    """The steady-turn USV above (seed 2367799915, 2x noise) losing 30 % of K at 200 s, on a record
+    whose turn after the change holds the rudder still: once the new data span min_window_length
+    the full fits of them are refused (K only to 7 %: the held rudder leaves T1 open), and K
+    refitted on all the new data with the time constants held (r = K delta in a steady turn) is
+    published at each refit instead, within 1 % of the new K, the refusal saying so (before, K was
+    no longer refitted once the new data spanned min_window_length)."""
+    from ship_ident.bench.peers import dataset_samples, recovery_time
+
+    change, config = 200.0, OnlineConfig()
+    sim = _losing_gain(2367799915, "steady_turns", 2.0, 2, change, duration=change + 80)
+    start = change - config.window_length - 2 * config.refit_period  # one full window of the old hull
+    samples = [s for s in dataset_samples(sim.dataset) if s.time >= start]
+    records = list(run_schedule(OnlineIdentifier(config), samples))
+    k_new = sim.info["truth_after"]["K"]
+    assert recovery_time(*k_trace(records), change, k_new) <= 40.0  # the change found 35 s after it
+    followed = [
+        r
+        for r in records
+        if r.window[1] - r.window[0] >= config.min_window_length
+        and r.new_estimate
+        and any(FOLLOWED_INSTEAD in sentence for sentence in r.conditions.values())
+    ]
+    assert len(followed) >= 2 and all(abs(r.estimate["parameters"]["K"] / k_new - 1) < 0.01 for r in followed)
 
 
 @pytest.mark.slow

@@ -233,7 +233,7 @@ def test_a_quick_usv_on_rudder_steps_run_with_its_true_model_raises_no_change():
     0.7x noise. Its true model, run free over each 30 s test block from the measured state at the
     block's start, missed blocks that open just after a rudder step by 6-26 times its usual error
     (the transient of the unknown initial yaw acceleration, dying out over T1): two in a row, a
-    false change. Run from one block earlier, every block stays within 2 times."""
+    false change. Run from one block earlier, every block stays within 3 times."""
     case = vessels.draw_case(568021594, quick=True)
     config, seed = case["config"], case["seed"]
     noise = Noise().scaled(case["noise"])
@@ -253,7 +253,7 @@ def test_a_quick_usv_on_rudder_steps_run_with_its_true_model_raises_no_change():
             ratios.append(ratio)
             changes.append(changed_at)
         detector.calibrate(structure, known, window)
-    assert len(ratios) == 24 and max(ratios) < 2.0
+    assert len(ratios) == 24 and max(ratios) < 3.0
     assert changes == [None] * 24
 
 

@@ -655,7 +655,7 @@ class OnlineIdentifier:
             f"{config.change_test_length:g} s) mispredicts them "
             f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
             f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
-            f"the window restarts at {changed_at:.1f} s, where the error stepped up (K refitted on the "
+            f"the window restarts at {changed_at:.1f} s, where it most likely changed (K refitted on the "
             f"new data with the time constants held until they span {config.min_window_length:g} s)"
         )
         with self._lock:

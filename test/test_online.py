@@ -262,7 +262,7 @@ def test_a_hull_changed_while_coasting_is_found_as_its_rudder_moves_and_restarte
     amidships from 238 s to 247.3 s. Its true model (the reference) misses the newest 2 s by 83 times
     its usual error at 249.5 s, the whole 5 s of the quick test by 35 times (upper quartile) only at
     250 s: the change is found at 249.5 s. Its error stepped up at 247.8 s, but the coasting hull's
-    yaw-rate decay and heading already show the new time constant: the window restarts within 1 s
+    yaw-rate decay and heading already show the new time constant: the window restarts within 2 s
     of 240 s (at 247.8 s K refitted 2.6 s after it was 6 % off, from 240 s 1 %)."""
     config = OnlineConfig()
     structure = config.structure()
@@ -280,7 +280,7 @@ def test_a_hull_changed_while_coasting_is_found_as_its_rudder_moves_and_restarte
         if changed_at is not None:
             found = end
             break
-    assert found == 249.5 and abs(changed_at - 240.0) <= 1.0
+    assert found == 249.5 and abs(changed_at - 240.0) <= 2.0
 
 
 def test_effects_accept_comma_text():

@@ -28,7 +28,14 @@ from itertools import chain
 
 import numpy as np
 
-from .change import ChangeDetector, block_errors, covering_blocks, fit_gain
+from .change import (
+    CHANGED_PARAMETERS,
+    GAIN_FIT_SPAN,
+    ChangeDetector,
+    block_errors,
+    covering_blocks,
+    fit_gain,
+)
 from .dataset import DataError, Dataset, resample_series
 from .estimators import make_estimator
 from .estimators.base import MAX_RELATIVE_ERRORS, Estimate, excitation_shortfall, loose_parameters
@@ -81,11 +88,9 @@ FREE_RUN_TOLERANCE = 1.25  # a new estimate's free run may miss the window at mo
 # more (mean squares) than the last good one's
 # Refitted on the new data after a change, the first set the data determine: the gain with the main
 # time constant, or alone, once the new data span GAIN_FIT_SPAN main time constants of the last good
-# estimate (each block's initial yaw rate and acceleration are fitted with them; on one time
-# constant of a random-step record K came out 13 % off, on half of one 27 %). The rudder offset is
+# estimate (each block's initial yaw rate and acceleration are fitted with them). The rudder offset is
 # held: loading does not move it, and a held rudder cannot tell it from the gain.
-GAIN_FITS = (("K", "T", "T1"), ("K",))
-GAIN_FIT_SPAN = 1.5
+GAIN_FITS = (CHANGED_PARAMETERS, ("K",))
 MIN_GAIN_SAMPLES = 20  # new samples needed for the gain refit after a change
 # The gain refit's free runs restart from the measured state every change_test_length s, or every
 # GAIN_BLOCK_SPAN held main time constants when that is longer: a block shorter than the response
@@ -678,7 +683,7 @@ class OnlineIdentifier:
             f"{config.change_test_length:g} s) mispredicts them "
             f"({ratio:.0f}x its usual free-run yaw-rate error, mean squares): the vessel changed (loading, fouling, "
             f"damage) or it meets conditions the model lacks an effect for (ship-ident diagnose); "
-            f"the window restarts at {changed_at:.1f} s, where the error stepped up (K refitted on the "
+            f"the window restarts at {changed_at:.1f} s, where it most likely changed (K refitted on the "
             f"new data with the time constants held until they span {config.min_window_length:g} s, and while "
             f"full fits on them are refused)"
         )

@@ -228,9 +228,10 @@ class OnlineConfig:
     change_ratio: float = parameter(
         9.0,
         "free-run yaw-rate error of the newest model fitted before the newest change_test_length s, as a "
-        "multiple of its usual level (mean squares), beyond which on two refits in a row (or 4x it once over "
-        "the newest refit period; or above 3 with K refitted on them moved by > 15 %) the vessel counts as "
-        "changed and the window restarts (vessel_changed); "
+        "multiple of its usual level (mean squares), beyond which on two refits in a row (or 4x it once from "
+        "any sample of the newest refit period on, 20 samples at least; or above 3 with K refitted on them "
+        "moved by > 15 %) the vessel counts as changed and the window restarts where it most likely changed "
+        "(vessel_changed); "
         "0: never, else > 1",
         "",
         (0.0, 1e6),

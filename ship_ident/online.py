@@ -616,7 +616,9 @@ class OnlineIdentifier:
 
         It sits on a physical bound; or its free run misses this window more than the last good
         estimate's (FREE_RUN_TOLERANCE, mean squares over blocks of ``change_test_length``, each run
-        free from the measured state); or its gain or main time constant jumps beyond
+        free from the measured state one block before it: a run started at the block carries the
+        transient of its unknown yaw acceleration, which favours whichever time constants shed it
+        fastest); or its gain or main time constant jumps beyond
         JUMP_STANDARD_ERRORS joint standard errors from the last good one, and neither does its free
         run over the newest ``change_test_length`` s beat the last good one's CLEAR_IMPROVEMENT times
         (a changed vessel shows there first), nor does the previous refit's held estimate agree with
@@ -630,7 +632,7 @@ class OnlineIdentifier:
         n = int(round(config.change_test_length / dataset.sample_time))
         blocks = covering_blocks(dataset, n)
         new_error, old_error = (
-            float(np.mean(block_errors(structure, p, dataset, blocks)))
+            float(np.mean(block_errors(structure, p, dataset, blocks, lead=n)))
             for p in (estimate.parameters, last_good.parameters)
         )
         if math.isfinite(old_error) and not new_error <= FREE_RUN_TOLERANCE * old_error:
@@ -643,7 +645,8 @@ class OnlineIdentifier:
             return None
         newest = blocks[-1:]
         new_newest, old_newest = (
-            float(block_errors(structure, p, dataset, newest)[0]) for p in (estimate.parameters, last_good.parameters)
+            float(block_errors(structure, p, dataset, newest, lead=n)[0])
+            for p in (estimate.parameters, last_good.parameters)
         )
         if not old_newest < CLEAR_IMPROVEMENT * new_newest:  # NaN: the last good one diverges there
             return None

@@ -631,10 +631,10 @@ class OnlineIdentifier:
             return None
         n = int(round(config.change_test_length / dataset.sample_time))
         blocks = covering_blocks(dataset, n)
-        new_error, old_error = (
-            float(np.mean(block_errors(structure, p, dataset, blocks, lead=n)))
-            for p in (estimate.parameters, last_good.parameters)
+        new_blocks, old_blocks = (
+            block_errors(structure, p, dataset, blocks, lead=n) for p in (estimate.parameters, last_good.parameters)
         )
+        new_error, old_error = float(np.mean(new_blocks)), float(np.mean(old_blocks))
         if math.isfinite(old_error) and not new_error <= FREE_RUN_TOLERANCE * old_error:
             return (
                 f"its free run misses the window more than the last good estimate's (yaw-rate rms "
@@ -643,11 +643,7 @@ class OnlineIdentifier:
         jump, name = _jump(estimate, last_good)
         if jump <= JUMP_STANDARD_ERRORS:
             return None
-        newest = blocks[-1:]
-        new_newest, old_newest = (
-            float(block_errors(structure, p, dataset, newest, lead=n)[0])
-            for p in (estimate.parameters, last_good.parameters)
-        )
+        new_newest, old_newest = float(new_blocks[-1]), float(old_blocks[-1])
         if not old_newest < CLEAR_IMPROVEMENT * new_newest:  # NaN: the last good one diverges there
             return None
         candidate, self._candidate = self._candidate, estimate

@@ -270,7 +270,7 @@ class OnlineIdentifier:
         return rejection or "accepted"
 
     def _observe_clock(self, now: float) -> None:
-        """Clock jumps restart the schedule from ``now``.
+        """Clock jumps restart the schedule from ``now`` (at the pace of ``_period``).
 
         A reading far behind the newest time seen (bag loop, simulator restart)
         also empties the window. A step forward by more than one refit period
@@ -296,7 +296,7 @@ class OnlineIdentifier:
         self._last_jump = now - self._latest_time
         self.counts["clock_jumps"] += 1
         self._latest_time = now
-        self._next_due = now + config.refit_period
+        self._next_due = now + self._period(now)  # a gain followed through the jump keeps its pace
 
     # --- schedule --------------------------------------------------------
     def due(self, now: float) -> bool:
@@ -316,16 +316,20 @@ class OnlineIdentifier:
         """The next refit one period on (a refit period; WATCHES_PER_REFIT times faster while the
         gain follows a change); a refit off the schedule (a change just found) brings it no later
         than one period from ``now``."""
-        period = self._config.refit_period
-        self._next_watch = now + period / WATCHES_PER_REFIT
-        if self._following(now):
-            period /= WATCHES_PER_REFIT
+        self._next_watch = now + self._config.refit_period / WATCHES_PER_REFIT
+        period = self._period(now)
         if self._next_due is None or now - self._next_due >= period:
             self._next_due = now + period
         elif now < self._next_due:
             self._next_due = min(self._next_due, now + period)
         else:
             self._next_due += period
+
+    def _period(self, now: float) -> float:
+        """The time to the next refit (s): a refit period, WATCHES_PER_REFIT times shorter while
+        the gain follows a change."""
+        period = self._config.refit_period
+        return period / WATCHES_PER_REFIT if self._following(now) else period
 
     def _following(self, now: float) -> bool:
         """Whether the gain follows a change at clock time ``now`` (s): one was found, and the data

@@ -643,6 +643,29 @@ def test_a_change_found_between_refits_is_followed_every_tenth_of_a_refit_period
     assert np.allclose(np.diff(later), config.refit_period, atol=0.05)
 
 
+@pytest.mark.slow
+def test_a_gain_followed_through_a_clock_jump_keeps_its_pace():
+    """The same record with every input silent for 7 s (more than a refit period) soon after the
+    change is found: the clock jump restarts the schedule at the follow's pace (a tenth of a refit
+    period), not at the refit period (the node's change-follow test, played fast beside other
+    tests, once saw its follow's refits every 5 s after such a silence)."""
+    from ship_ident.bench.peers import dataset_samples
+
+    change, config = 240.0, OnlineConfig()
+    sim = simulate(
+        "random", "seed001", duration=300.0, seed=31, change=(change, {"K": 0.7 * 0.5883, "T1": 1.3 * 1.4397})
+    )
+    silent = (252.0, 259.0)
+    samples = [s for s in dataset_samples(sim.dataset) if not silent[0] < s.time < silent[1]]
+    ident = OnlineIdentifier(config)
+    records = list(run_schedule(ident, samples))
+    following = [r.time for r in records if "vessel_changed" in r.conditions]
+    assert following[0] < silent[0] and ident.counts["clock_jumps"] == 1
+    after = [t for t in following if t >= silent[1]][:WATCHES_PER_REFIT]
+    assert len(after) == WATCHES_PER_REFIT and after[0] < silent[1] + 1.0
+    assert np.allclose(np.diff(after), config.refit_period / WATCHES_PER_REFIT, atol=0.05)
+
+
 def _losing_gain(
     vessel_seed: int, manoeuvre: str, noise_scale: float, seed: int, change: float, duration: float | None = None
 ):

@@ -514,16 +514,17 @@ class OnlineIdentifier:
             limits = {name: STARTUP_TRUST_SHARE * limit for name, limit in limits.items()}
         loose, figures = loose_parameters(published.parameters, published.std_errors, limits)
         if loose:
-            held = (  # after a change, a K refitted on the new data is not replaced by a looser one
-                "K" in loose
-                and self._change_note is not None
+            followed = self._gain_followed()
+            held = (  # after a change, a K refitted on the new data is not replaced by a looser fit
+                self._change_note is not None
                 and last_good is not None
-                and last_good.std_errors.get("K", math.inf) < published.std_errors["K"]
+                and (followed or ("K" in loose and last_good.std_errors.get("K", math.inf) < published.std_errors["K"]))
             )
             record.conditions["uncertain_estimate"] = (
                 f"the window determines {', '.join(loose)} only loosely ({figures}): "
                 + (
-                    f"K known better by the last good estimate; {KEEPING}"
+                    f"{'the gain followed on the new data' if followed else 'K known better by the last good estimate'}"
+                    f" is kept until a full fit is trusted; {KEEPING}"
                     if held
                     else "published with its uncertainty, not to be trusted as OK"
                 )
@@ -603,8 +604,7 @@ class OnlineIdentifier:
         # window straddling the change, fitted partly on these very data; once K has been followed
         # on the new data, against that (each refit would otherwise jump from the old hull again and
         # be held for the next one to confirm: every other refit refused)
-        with self._lock:
-            followed = self._last_good_window[0] >= self._window_floor
+        followed = self._gain_followed()
         yardstick = last_good if followed else replace(last_good, parameters=dict(last_good.parameters, **held))
         reason = undetermined or self._distrust(config, structure, estimate, dataset, yardstick)
         if reason:
@@ -614,6 +614,11 @@ class OnlineIdentifier:
             record.conditions[name] = f"{full_fit.removesuffix('; ' + KEEPING)}; {sentence}" if full_fit else sentence
             return
         self._publish(config, structure, estimate, estimate, dataset, record, scatter=False)
+
+    def _gain_followed(self) -> bool:
+        """Whether the estimate in force was fitted on data after the last change (a followed gain)."""
+        with self._lock:
+            return self._last_good_window[0] >= self._window_floor
 
     def _distrust(self, config, structure, estimate, dataset, last_good) -> str | None:
         """Why a new estimate (published standard errors) must not replace the last good one, or None.

@@ -158,6 +158,36 @@ def resample_series(
     )
 
 
+# A signal sampled at least this many times per grid step is averaged over each step, not
+# interpolated (``on_grid``)
+SAMPLES_TO_AVERAGE = 2.0
+
+
+def on_grid(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, sample_time: float) -> np.ndarray:
+    """A signal (sorted ``stamps`` in s, ``values``) at the ``grid`` points: its linear
+    interpolant's mean over the step [t - h/2, t + h/2] around each point (h = ``sample_time``;
+    the step shrinks symmetrically at the span's ends) when its median stamp step is at most
+    1/SAMPLES_TO_AVERAGE of h, else the interpolant itself. Interpolating a fast signal keeps one
+    sample in h / step and throws the rest away: a slow ship's 1 s grid on 10 Hz sensors kept a
+    tenth of the data, and its estimates scattered sqrt(10) times wider than the data allow; the
+    step mean keeps the sensor noise white and divides its variance by the samples averaged, and
+    it shifts a smooth signal by only h^2 / 24 times its second derivative."""
+    if len(stamps) < 2 or np.median(np.diff(stamps)) > sample_time / SAMPLES_TO_AVERAGE:
+        return np.interp(grid, stamps, values)
+    steps = np.diff(stamps)
+    slopes = np.diff(values) / steps
+    integral = np.concatenate(([0.0], np.cumsum(0.5 * (values[:-1] + values[1:]) * steps)))
+
+    def primitive(t):  # the interpolant's integral from stamps[0] to t (t within the stamps' span)
+        i = np.clip(np.searchsorted(stamps, t, side="right") - 1, 0, len(stamps) - 2)
+        dt = t - stamps[i]
+        return integral[i] + dt * (values[i] + 0.5 * slopes[i] * dt)
+
+    half = np.clip(np.minimum(grid - stamps[0], stamps[-1] - grid), 0.0, 0.5 * sample_time)  # symmetric at the ends
+    means = (primitive(grid + half) - primitive(grid - half)) / np.where(half > 0, 2 * half, 1.0)
+    return np.where(half > 0, means, np.interp(grid, stamps, values))
+
+
 def resample_signals(
     series: dict[str, tuple[np.ndarray, np.ndarray]],
     sample_time: float,
@@ -172,7 +202,8 @@ def resample_signals(
     Non-finite samples are dropped,
     stamps sorted and de-duplicated. The grid covers the span where every
     signal has data; values are linearly interpolated (heading after
-    unwrapping). Where any signal has no sample for longer than
+    unwrapping), or averaged over each grid step when sampled faster
+    (``on_grid``). Where any signal has no sample for longer than
     ``gap_threshold`` (default 5 sample times) the grid is cut: the gap is
     reported in ``gaps`` and the segments on each side stay apart.
     """
@@ -208,7 +239,7 @@ def resample_signals(
             a, b = stamps[i], stamps[i + 1]
             gaps.append((float(a), float(b)))
             valid &= ~((grid > a) & (grid < b))
-    out = {name: np.interp(grid, s, v) for name, (s, v) in clean.items()}
+    out = {name: on_grid(s, v, grid, sample_time) for name, (s, v) in clean.items()}
     segments, i, n = [], 0, len(grid)
     while i < n:
         if not valid[i]:

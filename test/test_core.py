@@ -102,6 +102,25 @@ def test_resample_splits_gaps_sorts_and_unwraps():
     assert np.allclose(ds.rudder, np.sin(ds.time), atol=2e-3)
 
 
+def test_a_signal_sampled_faster_than_the_grid_is_averaged_over_each_step():
+    """10 Hz samples on a 1 s grid: each grid value is the mean over its step, so white noise falls
+    by sqrt(10) (interpolation keeps one sample in ten and all its noise); a ramp stays exact to
+    the grid's ends; a signal sampled at the grid's own rate is interpolated, not smoothed."""
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 600.0, 0.1)
+    slow = 0.3 * np.sin(0.05 * t)
+    series = {
+        "rudder": (t, slow + 0.01 * rng.standard_normal(len(t))),
+        "heading": (t, 0.02 * t),
+        "yaw_rate": (t[::10], slow[::10]),
+    }
+    ds = resample_series(series, 1.0)
+    truth = 0.3 * np.sin(0.05 * ds.time)
+    assert np.std(ds.rudder - truth) == pytest.approx(0.01 / np.sqrt(10), rel=0.1)
+    assert np.allclose(ds.heading, 0.02 * ds.time, atol=1e-12)
+    assert np.allclose(ds.yaw_rate, truth, atol=1e-12)
+
+
 def test_resample_rejects_nonoverlapping_and_missing_signals():
     t = np.arange(0, 10, 0.1)
     with pytest.raises(DataError, match="no usable yaw_rate"):

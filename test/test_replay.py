@@ -209,7 +209,7 @@ def test_kvlcc2_zigzag_uncertainty_covers_the_scatter_and_is_not_saturated():
     assert out.returncode == 0, out.stderr
     records = [json.loads(line) for line in out.stdout.splitlines()]
     published = [(r["parameters"]["K"], r["std_errors"]["K"]) for r in records if r["new_estimate"]]
-    assert len(published) >= 5
+    assert len(published) >= 4  # 6 on 120 s shooting intervals; on 3 T (225 s) two late windows are refused
     apart = [abs(k2 - k1) / math.hypot(s1, s2) for (k1, s1), (k2, s2) in zip(published, published[1:])]
     assert max(apart) < 3.0, apart
     assert not any("rudder_saturated" in r["conditions"] for r in records)

@@ -45,6 +45,8 @@ from .output_error import OutputError
 class PredictionError(OutputError):
     """Refine a starting estimate by the prediction-error criterion (rudder noise as input noise)."""
 
+    walk_limited = False  # the innovation filter takes in the rudder noise's walk
+
     def __init__(self, start, max_iterations: int = 30, shooting_s: float = 120.0, explore: bool = True):
         super().__init__(start, max_iterations=max_iterations, shooting_s=shooting_s, explore=explore)
         self.name = f"{start.name}+pem"

@@ -22,9 +22,12 @@ _test_index = itertools.count()
 
 @pytest.fixture
 def domain_id():
-    """A ROS domain per test: xdist worker and test index keep concurrent tests apart (1..100)."""
+    """A ROS domain per test (1..100): a worker's tests run one after another, and the two xdist
+    workers draw from domains of their own parity, so concurrent tests never share one (with
+    worker * 37 added instead they could: the likely cause of a run where two node tests, running
+    at once, both saw no estimate at all)."""
     worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:] or 0)
-    return 1 + (worker * 37 + 7 * next(_test_index) + os.getpid() % 13) % 100
+    return 1 + (2 * (7 * next(_test_index) + os.getpid() % 13) + worker % 2) % 100
 
 
 @pytest.fixture(scope="module")

@@ -124,10 +124,8 @@ TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04}
 # Until a full window has been fitted, an estimate of a shorter one is trusted within this share of
 # those errors: a fit on few data is biased by more of its standard error, and no run of successive
 # estimates shows it yet (bench vessels seed 619072884, 2.6x noise: the first 60-70 s windows gave
-# T1 11-12 % off at 3.4 standard errors, published OK). Half of them refused a third of the
-# well-excited start-up refits of 24 fresh cases (seeds 4146945961-84); three quarters, 14 %, with
-# none of 279 published OK more than 7 % off and coverage K / T1 0.95 / 0.99
-STARTUP_TRUST_SHARE = 0.75
+# T1 11-12 % off at 3.4 standard errors, published OK)
+STARTUP_TRUST_SHARE = 0.5
 # A second pole T2 below this share of T1 that the window cannot tell from zero leaves a nearly
 # first-order response: T1 may slide along the T2 = T3 valley (``first_order_valley`` measures how
 # far); a larger one that scatters

@@ -524,11 +524,11 @@ class OnlineIdentifier:
                 and last_good is not None
                 and (followed or ("K" in loose and last_good.std_errors.get("K", math.inf) < published.std_errors["K"]))
             )
+            kept = "the gain followed on the new data" if followed else "K known better by the last good estimate"
             record.conditions["uncertain_estimate"] = (
                 f"the window determines {', '.join(loose)} only loosely ({figures}): "
                 + (
-                    f"{'the gain followed on the new data' if followed else 'K known better by the last good estimate'}"
-                    f" is kept until a full fit is trusted; {KEEPING}"
+                    f"{kept} is kept until a full fit is trusted; {KEEPING}"
                     if held
                     else "published with its uncertainty, not to be trusted as OK"
                 )
@@ -858,8 +858,8 @@ def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset
         slide = abs(held.parameters["T1"] - t1) * std_errors["T2"] / (end - t2)
     except (DataError, StructureError, ValueError, np.linalg.LinAlgError):
         slide = math.inf
-    floor = structure.bounds(["T2"], dataset)[0][0]
-    at_foot = start_up and t2 - floor < FOOT_SHARE * std_errors["T2"]  # pressed on its floor: no distribution
+    # pressed on its physical floor, T2's error describes no distribution
+    at_foot = start_up and t2 - structure.parameter("T2").lower < FOOT_SHARE * std_errors["T2"]
     return dict(std_errors, T1=max(std_errors["T1"], slide, joint if at_foot else 0.0))
 
 

@@ -226,9 +226,8 @@ class OutputError(Estimator):
         self.max_iterations = max_iterations
         self.shooting_s = shooting_s
         self.explore = explore
-        self.shooting_span = (
-            SHOOTING_SPAN if explore else 0.0
-        )  # the diagnosis's figures were measured on fixed intervals
+        # the diagnosis's figures were measured on fixed intervals
+        self.shooting_span = SHOOTING_SPAN if explore else 0.0
         self.name = f"{start.name}+oe"
 
     def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
@@ -283,12 +282,6 @@ class OutputError(Estimator):
                 rudder_walk = (params["K"] * dataset.noise_std("rudder")) ** 2 * dataset.sample_time
                 length = min(length, dataset.noise_std("heading") ** 2 / rudder_walk)
         return max(length, self.shooting_s)
-
-    def intervals(self, dataset: Dataset, params: dict) -> tuple:
-        """Shooting intervals (``shooting_length``): each restarts the free run from its own estimated state."""
-        return shooting_intervals(
-            dataset.segments, int(round(self.shooting_length(dataset, params) / dataset.sample_time))
-        )
 
     @staticmethod
     def residual_weighting(structure, dataset, params0, s_psi, s_r, intervals):
@@ -375,7 +368,8 @@ class OutputError(Estimator):
         s_psi = dataset.noise_std("heading")
         s_r = dataset.noise_std("yaw_rate")
         hull = dict(params0, **starts[0]) if starts else params0  # a given start knows the hull best
-        intervals = self.intervals(dataset, hull)
+        shooting_s = self.shooting_length(dataset, hull)  # each interval restarts from its own fitted state
+        intervals = shooting_intervals(dataset.segments, int(round(shooting_s / h)))
         shots = replace(dataset, segments=intervals)
         n_state = 3 if structure.order == 2 else 2
         bias0 = structure.yaw_rate_bias(params0)
@@ -587,7 +581,7 @@ class OutputError(Estimator):
             "iterations": iterations,
             "simulations": simulations,
             "shooting_intervals": len(intervals),
-            "shooting_s": self.shooting_length(dataset, hull),
+            "shooting_s": shooting_s,
             "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
             "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
         }

@@ -126,15 +126,15 @@ TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04}
 # estimates shows it yet (bench vessels seed 619072884, 2.6x noise: the first 60-70 s windows gave
 # T1 11-12 % off at 3.4 standard errors, published OK)
 STARTUP_TRUST_SHARE = 0.5
-# A second pole T2 below this share of T1 that the window cannot tell from zero leaves a nearly
-# first-order response: T1 may slide along the T2 = T3 valley (``first_order_valley`` measures how
-# far); a larger one that scatters
-# (seed 001's hull with 1 % of samples spiked: T2 0.1-0.6 s, T1 within 4 %) does not carry T1 along
+# A second pole T2 that the window cannot tell from zero leaves the response nearly first order: T1 may
+# slide along the T2 = T3 valley (``first_order_valley``). The cost's profile along it is taken with T2
+# held at its floor and at these shares of T1 above the estimate (the truth may lie far beyond T2's own
+# 95 % end: bench vessels seed 777000009's start-up windows, T2 0.03 +- 0.18 s for a true 1.27 s)
+VALLEY_RUNGS = (0.1, 0.2, 0.35, 0.5)
+VALLEY_CLIMB_CHI2 = 16.0  # a rung this far up the profile (4 standard errors) ends the climb
+# Regressions cannot hold a parameter: below this share of T1, an undetermined T2 gives T1 the joint
+# error of T1, T2 and T3 instead
 FIRST_ORDER_SHARE = 0.1
-# T2 closer to its floor than this share of its own standard error sits at the valley's foot: the
-# search held it there, and that error describes no distribution of T2 (``first_order_valley``)
-FOOT_SHARE = 0.1
-VALLEY_PROFILE_SHARE = 0.5  # T2 / T1 at most where T1's slide along that valley is measured
 
 # Estimator flags that make an estimate unusable even with a good-looking fit: the closed-form
 # map gave a gain or time constant outside its physical range, the output-error search ended
@@ -506,9 +506,7 @@ class OnlineIdentifier:
         full = dataset.duration >= config.window_length - FULL_WINDOW_MARGIN * config.sample_time
         start_up = not (full or self._full_window_fitted)  # a short window, no history of estimates
         honest = self._scatter.honest(estimate)
-        published = replace(
-            estimate, std_errors=first_order_valley(estimate, honest, estimator, structure, dataset, start_up)
-        )
+        published = replace(estimate, std_errors=first_order_valley(estimate, honest, estimator, structure, dataset))
         distrust = self._distrust(config, structure, published, dataset, last_good)
         if distrust:
             record.conditions["implausible_estimate"] = f"{distrust}; {KEEPING}"
@@ -823,44 +821,64 @@ class EstimateScatter:
         return honest
 
 
-def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset, start_up: bool = False) -> dict:
-    """Standard errors with T1's at least its slide along the T2 = T3 valley when the second pole T2 is
-    below FIRST_ORDER_SHARE of T1 and the window cannot tell it from zero (its 95 % interval reaches
-    it): the response it sees is nearly first order, and T1 may slide with T2 and T3 further than
-    the error at the search's end says (bench vessels seed 128754784: T1 1.04 +- 0.10 s with T2 0.01
-    +- 0.11 s, truth 1.15 and 0.27 s). The window is refitted with T2 held at the upper end of its
-    95 % interval (at most VALLEY_PROFILE_SHARE of T1) and T3 moved by as much (T1 + T2 - T3 kept):
-    T1's shift there, over that end's distance in T2's standard errors, is T1's slide (seed
-    128754784: 0.16 s at 1.96, 8 %; a hull whose pole and zero cancel, T2 0.42 and T3 0.44 s, seed
-    2903470093: 0.2 %; a refit that fails leaves T1 undetermined). For an estimator that cannot hold
-    a parameter (a regression without output error), and on a ``start_up`` window (shorter than the
-    window, none full fitted yet) whose search ended with T2 on its floor (within FOOT_SHARE of its
-    error: the foot of the valley, where that error describes no distribution), the slide is at
-    least the joint error sqrt(s_T1^2 + s_T2^2 + s_T3^2) (seed 315185512, a 65 s window: T2 0.0104
-    +- 0.26 s on its 0.01 s floor, truth 1.39 s, and T1 12 % off at a slide of 1.7 %; with T2 off
-    its floor the joint error refused every start-up window of seed 3014743362, T1 +- 7 % with T2
-    0.12 +- 0.20 s, within 0.4 % of the truth). A rudder lead T3 that cannot be told from zero alone
-    is a hull without one (seed 001's: T1 stays determined)."""
+def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset) -> dict:
+    """Standard errors with T1's at least its slide along the T2 = T3 valley when the window cannot
+    tell the second pole T2 from zero (its 95 % interval reaches it): the response it sees is nearly
+    first order, and T1 may move with T2 and T3 further than the error at the search's end says.
+    The slide is read off the cost's profile over T2 (``valley_slide``). With T2 undetermined the
+    local errors describe no distribution: T2's 95 % end was a single held point that missed truths
+    far beyond it (bench vessels seed 128754784, a USV with T1 1.15 s, T2 0.27 s: T1 17 % off
+    published OK at +- 3.7 %, T2 0.03 +- 0.07 s). An estimator that cannot hold a parameter (a
+    regression without output error) gives T1 the joint error sqrt(s_T1^2 + s_T2^2 + s_T3^2) when T2
+    is below FIRST_ORDER_SHARE of T1. A rudder lead T3 that cannot be told from zero alone is a hull
+    without one (seed 001's: T1 stays determined)."""
     names = ("T1", "T2", "T3")
     parameters = estimate.parameters
     if not all(n in parameters and n in std_errors for n in names):
         return std_errors
     t1, t2 = abs(parameters["T1"]), abs(parameters["T2"])
-    if not (1.96 * std_errors["T2"] > t2 and t2 < FIRST_ORDER_SHARE * t1):
+    if not 1.96 * std_errors["T2"] > t2:
         return std_errors
-    joint = math.sqrt(sum(std_errors[n] ** 2 for n in names))
-    if not hasattr(estimator, "fit_held"):
-        return dict(std_errors, T1=max(std_errors["T1"], joint))
-    end = min(t2 + 1.96 * std_errors["T2"], VALLEY_PROFILE_SHARE * t1)
-    start = {"T2": end, "T3": max(parameters["T3"] + end - t2, 0.0)}
+    if hasattr(estimator, "fit_held"):
+        return dict(std_errors, T1=max(std_errors["T1"], valley_slide(estimate, estimator, structure, dataset)))
+    if t2 < FIRST_ORDER_SHARE * t1:
+        return dict(std_errors, T1=max(std_errors["T1"], math.sqrt(sum(std_errors[n] ** 2 for n in names))))
+    return std_errors
+
+
+def valley_slide(estimate, estimator, structure, dataset) -> float:
+    """T1's standard error (s) along the T2 = T3 valley, from the profile of the cost over T2: the
+    window refitted with T2 held at its floor and at VALLEY_RUNGS of T1 above the estimate, T3 moved
+    with it (T1 + T2 - T3 kept as a start), every point weighed alike (``fit_held``'s
+    ``weighted_at``). A rung where the cost rose by chi2 (its rise over the estimate's, deflated by
+    the Gauss-Newton over the Newey-West variance of T1: residuals that are not white count less)
+    moved T1 by dT1: T1's error is at least |dT1| / max(sqrt(chi2), 1.96) (a rung inside the 95 %
+    region moved T1 within its interval; for a quadratic profile this is T1's error exactly). The
+    climb stops past VALLEY_CLIMB_CHI2. Seed 128754784 at 485 s: T1 3.7 % -> 13 % (WARN). A fit
+    that fails leaves T1 undetermined."""
+    parameters = estimate.parameters
+    t1, t2, t3 = abs(parameters["T1"]), abs(parameters["T2"]), parameters["T3"]
+    floor = structure.parameter("T2").lower
+
+    def held_at(value):
+        start = {"T2": value, "T3": max(t3 + value - t2, 0.0)}
+        return estimator.fit_held(structure, dataset, estimate, start, ("T2",), weighted_at=parameters)
+
     try:
-        held = estimator.fit_held(structure, dataset, estimate, start, ("T2",))
-        slide = abs(held.parameters["T1"] - t1) * std_errors["T2"] / (end - t2)
+        base = held_at(t2)
+        g, s = base.info["gauss_newton_std"]["T1"], base.std_errors["T1"]
+        deflate = min(1.0, (g / s) ** 2) if s > 0 else 1.0
+        slide = 0.0
+        for value in ([floor] if t2 > floor else []) + [share * t1 for share in VALLEY_RUNGS if share * t1 > t2]:
+            held = held_at(value)
+            chi2 = deflate * (held.info["cost"] - base.info["cost"])
+            shift = abs(held.parameters["T1"] - base.parameters["T1"])
+            slide = max(slide, shift / max(math.sqrt(max(chi2, 0.0)), 1.96))
+            if value > t2 and chi2 > VALLEY_CLIMB_CHI2:
+                break
+        return slide
     except (DataError, StructureError, ValueError, np.linalg.LinAlgError):
-        slide = math.inf
-    # pressed on its physical floor, T2's error describes no distribution
-    at_foot = start_up and t2 - structure.parameter("T2").lower < FOOT_SHARE * std_errors["T2"]
-    return dict(std_errors, T1=max(std_errors["T1"], slide, joint if at_foot else 0.0))
+        return math.inf
 
 
 def _drift_and_own_error(rows: list) -> tuple[float, float]:

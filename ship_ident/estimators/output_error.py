@@ -173,7 +173,7 @@ def _dense(a) -> np.ndarray:
     return a.toarray() if sparse.issparse(a) else a
 
 
-def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> np.ndarray:
+def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> tuple[np.ndarray, np.ndarray]:
     """Heteroscedasticity-and-autocorrelation-consistent (Newey-West) standard errors of the
     first ``p`` unknowns: bread (J'J)^-1 (``scaled_inverse``), meat the Bartlett-weighted long-run covariance of
     the per-sample scores J_k' f_k (heading and yaw-rate rows of one sample summed), lags up
@@ -181,19 +181,20 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     nearly independent). Only the parameter rows of the bread are needed, so the long-run
     covariance is taken of the p-dimensional projected scores: u' W u with W the Toeplitz
     matrix of the Bartlett weights, W u one convolution (FFT for long lag windows), so the
-    cost is linear in the samples. ``J`` may be a scipy sparse matrix."""
+    cost is linear in the samples. ``J`` may be a scipy sparse matrix. Also returns the plain
+    Gauss-Newton errors sqrt(diag (J'J)^-1) (white residuals of unit variance)."""
     from scipy.signal import convolve  # here: scipy.signal takes seconds to import
 
     try:
         bread = scaled_inverse(_dense(J.T @ J))[:p]
     except np.linalg.LinAlgError:
-        return np.full(p, np.inf)
+        return np.full(p, np.inf), np.full(p, np.inf)
     projected = np.asarray(J @ bread.T)
     u = projected[:n_samples] * f[:n_samples, None] + projected[n_samples:] * f[n_samples:, None]
     lags = np.arange(-min(bandwidth, n_samples - 1), min(bandwidth, n_samples - 1) + 1)
     bartlett = 1.0 - np.abs(lags) / (bandwidth + 1.0)
     meat = u.T @ convolve(u, bartlett[:, None], mode="same")
-    return np.sqrt(np.clip(np.diag(meat), 0, None))
+    return np.sqrt(np.clip(np.diag(meat), 0, None)), np.sqrt(np.clip(np.diag(bread[:, :p]), 0, None))
 
 
 HUBER_THRESHOLD = 5.0  # robust standard deviations beyond which a residual counts linearly
@@ -257,13 +258,21 @@ class OutputError(Estimator):
         return estimate
 
     def fit_held(
-        self, structure: Structure, dataset: Dataset, estimate: Estimate, start: dict, held: tuple
+        self,
+        structure: Structure,
+        dataset: Dataset,
+        estimate: Estimate,
+        start: dict,
+        held: tuple,
+        weighted_at: dict | None = None,
     ) -> Estimate:
         """Minimise the free-run error from ``start`` (``estimate``'s parameters moved) with the
         parameters named in ``held`` fixed at their values there: one point of the cost's profile
-        over them (how far the others move when those are set elsewhere)."""
+        over them (how far the others move when those are set elsewhere). ``weighted_at``: the
+        parameters whose noise model and Huber weights weigh the residuals (default: each start's
+        own), so that the costs (``info['cost']``) of points of one profile compare."""
         first = replace(estimate, parameters=dict(estimate.parameters, **start))
-        return self._refine(structure, dataset, first, (), explore=False, held=held)
+        return self._refine(structure, dataset, first, (), explore=False, held=held, weighted_at=weighted_at)
 
     def shooting_length(self, dataset: Dataset, params: dict) -> float:
         """Seconds per shooting interval for a hull near ``params``: ``shooting_s``, or
@@ -353,13 +362,21 @@ class OutputError(Estimator):
         return out
 
     def _refine(
-        self, structure: Structure, dataset: Dataset, first: Estimate, starts: tuple, explore: bool, held: tuple = ()
+        self,
+        structure: Structure,
+        dataset: Dataset,
+        first: Estimate,
+        starts: tuple,
+        explore: bool,
+        held: tuple = (),
+        weighted_at: dict | None = None,
     ) -> Estimate:
         """Minimise the free-run error from ``first`` (the regression fit, and its conservative
         variant) or from any of ``starts``, whichever simulates closest to the data; ``explore``:
         also from a range of time constants, every start's gain, rudder offset and states polished
         first (a cold fit; a warm one, from an estimate of a nearby window, needs neither); the
-        parameters named in ``held`` stay at ``first``'s values."""
+        parameters named in ``held`` stay at ``first``'s values; ``weighted_at`` (parameters): every
+        start weighed with the noise model and Huber weights there (``fit_held``)."""
         names = structure.free_names
         p = len(names)
         params0 = structure.clip_to_bounds(first.parameters)
@@ -447,6 +464,8 @@ class OutputError(Estimator):
         # at a regression start that missed the time scale favours starts near it) and with the
         # unknowns its free run is linear in (gain, rudder offset, interval states) fitted
         weighings = [self.residual_weighting(structure, dataset, unpack(x)[0], s_psi, s_r, intervals) for x in points]
+        if weighted_at is not None:
+            weighings = [self.residual_weighting(structure, dataset, weighted_at, s_psi, s_r, intervals)] * len(points)
         linear = [names.index(n) for n in LINEAR_NAMES if n in names] + list(range(p, p + states0.size))
         # the first step holds the rudder offset: at a gain far off its column (the gain times the
         # offset) is tiny and the step sends the offset to its bound (bench vessels seed 315185517, a
@@ -523,7 +542,11 @@ class OutputError(Estimator):
                     best, best_cost = found.x, float(found.fun @ found.fun)
             return best, iterations
 
-        robust = huber_weights(residual(x0), dataset.n_samples)
+        if weighted_at is not None:  # the Huber weights of that point, its states from the data
+            at = np.concatenate([[structure.clip_to_bounds(weighted_at)[n] for n in names], states0.ravel()])
+            robust = huber_weights(residual(at), dataset.n_samples)
+        else:
+            robust = huber_weights(residual(x0), dataset.n_samples)
         result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
         iterations = result.iterations
         in_valley_foot = self._in_valley_foot(names, result.x[:p])
@@ -542,7 +565,9 @@ class OutputError(Estimator):
             )
             iterations += valley_iterations + result.iterations
         params, _ = unpack(result.x)
-        std = parameter_std_errors(result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(intervals))
+        std, gauss_newton = parameter_std_errors(
+            result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(intervals)
+        )
         std_errors = {n: float(s) for n, s in zip(names, std)}
         std_errors.update({n: 0.0 for n in structure.fixed_names})
         flags = [
@@ -582,6 +607,8 @@ class OutputError(Estimator):
             "simulations": simulations,
             "shooting_intervals": len(intervals),
             "shooting_s": shooting_s,
+            "cost": float(result.fun @ result.fun),  # squared weighted residuals (-2 log-likelihood + const)
+            "gauss_newton_std": {n: float(s) for n, s in zip(names, gauss_newton)},
             "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
             "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
         }

@@ -132,9 +132,10 @@ STARTUP_TRUST_SHARE = 0.5
 # 95 % end: bench vessels seed 777000009's start-up windows, T2 0.03 +- 0.18 s for a true 1.27 s)
 VALLEY_RUNGS = (0.1, 0.2, 0.35, 0.5)
 PROFILE_CLIMB_CHI2 = 16.0  # a point this far up a profile (4 standard errors) ends its climb
-# An estimate that would be trusted with K's or T1's error past this share of its trusted
-# limit is first checked along the profile over the cubic damping alpha, at these of alpha's standard
-# errors either side (``cubic_damping_slides``); one whose errors are well within needs no check
+# A full window's estimate that would be trusted with K's or T1's error past this share of its
+# trusted limit is first checked along the profile over the cubic damping alpha, at these of alpha's
+# standard errors either side (``cubic_damping_slides``); one whose errors are well within needs no
+# check, nor does a start-up window's, trusted within half the errors
 ALPHA_CHECK_SHARE = 0.75
 ALPHA_RUNGS = (2.0, 4.0)
 # Regressions cannot hold a parameter: below this share of T1, an undetermined T2 gives T1 the joint
@@ -526,7 +527,7 @@ class OnlineIdentifier:
             if q in published.parameters
             and published.std_errors[q] > ALPHA_CHECK_SHARE * limits[q] * abs(published.parameters[q])
         ]
-        if not loose and close and hasattr(estimator, "fit_held"):
+        if not (loose or start_up) and close and hasattr(estimator, "fit_held"):
             published = replace(
                 published,
                 std_errors=cubic_damping_slides(published, published.std_errors, estimator, structure, dataset),

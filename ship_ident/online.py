@@ -521,13 +521,12 @@ class OnlineIdentifier:
         if start_up:
             limits = {name: STARTUP_TRUST_SHARE * limit for name, limit in limits.items()}
         loose, figures = loose_parameters(published.parameters, published.std_errors, limits)
-        close = [
-            q
-            for q in limits
+        close = any(  # an error past ALPHA_CHECK_SHARE of its limit
+            published.std_errors[q] > ALPHA_CHECK_SHARE * limit * abs(published.parameters[q])
+            for q, limit in limits.items()
             if q in published.parameters
-            and published.std_errors[q] > ALPHA_CHECK_SHARE * limits[q] * abs(published.parameters[q])
-        ]
-        if not (loose or start_up) and close and hasattr(estimator, "fit_held"):
+        )
+        if close and not (loose or start_up) and hasattr(estimator, "fit_held"):
             published = replace(
                 published,
                 std_errors=cubic_damping_slides(published, published.std_errors, estimator, structure, dataset),

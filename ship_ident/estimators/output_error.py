@@ -463,8 +463,11 @@ class OutputError(Estimator):
         # each start judged with the noise model at its own parameters (-2 log-likelihood: one fixed
         # at a regression start that missed the time scale favours starts near it) and with the
         # unknowns its free run is linear in (gain, rudder offset, interval states) fitted
-        weighings = [self.residual_weighting(structure, dataset, unpack(x)[0], s_psi, s_r, intervals) for x in points]
-        if weighted_at is not None:
+        if weighted_at is None:
+            weighings = [
+                self.residual_weighting(structure, dataset, unpack(x)[0], s_psi, s_r, intervals) for x in points
+            ]
+        else:
             weighings = [self.residual_weighting(structure, dataset, weighted_at, s_psi, s_r, intervals)] * len(points)
         linear = [names.index(n) for n in LINEAR_NAMES if n in names] + list(range(p, p + states0.size))
         # the first step holds the rudder offset: at a gain far off its column (the gain times the

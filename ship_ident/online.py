@@ -107,6 +107,7 @@ FOLLOWED_INSTEAD = "K refitted on the new data instead (see vessel_changed)"
 WATCHES_PER_REFIT = 10
 SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published uncertainty
 SCATTER_REWEIGHTINGS = 4  # least-squares passes of the scatter fit (EstimateScatter)
+MIN_FRESH_SHARE = 1e-3  # two estimates' difference has at least this share of their joint variance
 # A window is full when its resampled data span window_length within this many sample times: the
 # newest sample of each input may be a sample time old, the oldest a sample time inside the window,
 # and the grid's floor loses one more (with 1.5 a ship's window, sample time 0.37 s, never was).
@@ -511,8 +512,13 @@ class OnlineIdentifier:
             return
         full = dataset.duration >= config.window_length - FULL_WINDOW_MARGIN * config.sample_time
         start_up = not (full or self._full_window_fitted)  # a short window, no history of estimates
-        honest = self._scatter.honest(estimate)
-        published = replace(estimate, std_errors=first_order_valley(estimate, honest, estimator, structure, dataset))
+        # its own errors, T1's with its slide along the T2 = T3 valley: so it enters the scatter of the
+        # next estimates (a start-up fit at the valley's foot, T1 12 % off with a slide of 13 %, made
+        # the right ones after it look scattered by 3 of their errors: bench vessels seed 799606246)
+        estimate = replace(
+            estimate, std_errors=first_order_valley(estimate, estimate.std_errors, estimator, structure, dataset)
+        )
+        published = replace(estimate, std_errors=self._scatter.honest(estimate))
         distrust = self._distrust(config, structure, published, dataset, last_good)
         if distrust:
             record.conditions["implausible_estimate"] = f"{distrust}; {KEEPING}"
@@ -793,15 +799,19 @@ def _jump(estimate, reference) -> tuple[float, str]:
 class EstimateScatter:
     """Standard errors that cover the scatter of recent estimates, model error included.
 
-    The estimator's standard errors know the sensor noise only. Two estimates of a right model
-    from windows sharing a share 1 - f of their data differ by about sqrt(f (s1^2 + s2^2)). The
-    recent estimates (SCATTER_PAIRS of them) scatter further when the model misses the vessel
-    (an error that drifts with the data: differences grow with f, as phi^2 f (s1^2 + s2^2)) or
-    when each fit lands somewhere else in a flat valley of its cost (an error of its own, sigma,
-    whatever f: 2 sigma^2). Over every pair of recent estimates, d^2 / (f J^2) = phi^2 +
-    sigma^2 2 / (f J^2) (J^2 = s1^2 + s2^2) is fitted by least squares with phi^2, sigma^2 >= 0,
-    and a parameter's published standard error is sqrt(max(phi^2, 1) s^2 + sigma^2): a fit's own
-    error is added once, not inflated by 1 / f as a drifting one is.
+    The estimator's standard errors know the sensor noise only. Two estimates of a right model,
+    a with variance Va learnt a share i_a of it from the data it shares with b (and b likewise),
+    differ by a variance U = Va (1 - i_a) + Vb (1 - i_b) + (sqrt(Va i_a) - sqrt(Vb i_b))^2 (each
+    learns the shared data with its own weight); the shares come from where each fit learnt its
+    parameters (``Influence``; the time shares for an estimator without one): windows sliding off
+    the steps that taught them T1 onto a straight leg differ far more than their time shares say
+    (bench vessels seed 799606292). The recent estimates (SCATTER_PAIRS of them) scatter further
+    when the model misses the vessel (an error that drifts with the data: differences grow as
+    phi^2 U) or when each fit lands somewhere else in a flat valley of its cost (an error of its
+    own, sigma, whatever the shares: 2 sigma^2). Over every pair of recent estimates, d^2 / U =
+    phi^2 + sigma^2 2 / U is fitted by least squares with phi^2, sigma^2 >= 0, and a parameter's
+    published standard error is sqrt(max(phi^2, 1) s^2 + sigma^2): a fit's own error is added
+    once, not inflated as a drifting one is.
     """
 
     def __init__(self):
@@ -816,16 +826,15 @@ class EstimateScatter:
     def components(self, estimate) -> dict:
         """{parameter: (phi^2 >= 1, sigma^2 >= 0)} from the recent estimates and this one."""
         chain_ = list(self.recent) + [estimate]
-        pairs = {name: [] for name in estimate.parameters}  # (d^2 / (f J^2), 2 / (f J^2))
+        pairs = {name: [] for name in estimate.parameters}  # (d^2 / U, 2 / U)
         for i, a in enumerate(chain_):
             for b in chain_[i + 1 :]:
-                overlap = max(0.0, min(a.window[1], b.window[1]) - max(a.window[0], b.window[0]))
-                span = max(a.window[1] - a.window[0], b.window[1] - b.window[0], 1e-9)
-                fresh = max(1.0 - overlap / span, 1e-3)
                 for name, rows in pairs.items():
-                    joint_square = a.std_errors.get(name, 0.0) ** 2 + b.std_errors.get(name, 0.0) ** 2
-                    if joint_square > 0 and math.isfinite(joint_square) and name in a.parameters:
-                        unit = fresh * joint_square
+                    va, vb = a.std_errors.get(name, 0.0) ** 2, b.std_errors.get(name, 0.0) ** 2
+                    if va + vb > 0 and math.isfinite(va + vb) and name in a.parameters:
+                        ia, ib = _shared_share(a, b, name), _shared_share(b, a, name)
+                        apart = va * (1 - ia) + vb * (1 - ib) + (math.sqrt(va * ia) - math.sqrt(vb * ib)) ** 2
+                        unit = max(apart, MIN_FRESH_SHARE * (va + vb))
                         rows.append(((b.parameters[name] - a.parameters[name]) ** 2 / unit, 2.0 / unit))
         return {name: _drift_and_own_error(rows) for name, rows in pairs.items()}
 
@@ -933,6 +942,16 @@ def cubic_damping_slides(estimate, std_errors: dict, estimator, structure, datas
     ]
     slides = profile_slides(estimate, estimator, structure, dataset, "alpha", ladders, ("K", main))
     return dict(std_errors, **{q: max(std_errors[q], slides[q]) for q in slides})
+
+
+def _shared_share(a, b, name: str) -> float:
+    """The share of estimate ``a``'s variance of ``name`` learnt within ``b``'s window (its
+    ``Influence``; without one, the share of its window's time)."""
+    start, end = b.window
+    if a.influence is not None and name in a.influence.cumulative:
+        return min(max(a.influence.share_within(name, start, end), 0.0), 1.0)
+    overlap = max(0.0, min(a.window[1], end) - max(a.window[0], start))
+    return overlap / max(a.window[1] - a.window[0], 1e-9)
 
 
 def _drift_and_own_error(rows: list) -> tuple[float, float]:

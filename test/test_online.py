@@ -556,6 +556,60 @@ def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
     assert published([0.10, 0.114] * 10 + [0.10])["K"] > 0.005
 
 
+def _bench_case(seed: int, until: float):
+    """The records of bench vessels' case ``seed`` (quick) up to ``until`` s, and its truth; the
+    bench's whole record is simulated (its noise is drawn over all of it)."""
+    from ship_ident.bench.peers import dataset_samples
+
+    case = vessels.draw_case(seed, quick=True)
+    vessel, config = case["vessel"], case["config"]
+    change = None
+    if case["step"]:
+        change = (case["change_time"], {k: f * vessel.parameters[k] for k, f in vessels.CHANGE.items()})
+    sim = simulate(
+        case["maneuver"],
+        vessel,
+        duration=case["duration"],
+        sample_time=config.sample_time,
+        noise=Noise().scaled(case["noise"]),
+        seed=seed,
+        change=change,
+    )
+    samples = [s for s in dataset_samples(sim.dataset) if s.time <= until]
+    return list(run_schedule(OnlineIdentifier(config), samples)), sim
+
+
+def test_a_biased_start_up_estimate_does_not_make_the_right_ones_after_it_look_scattered():
+    """bench vessels' seed 799606246 USV (T1 1.73 s, mixed manoeuvre at 2x noise): its first
+    windows sit at the foot of the T2 = T3 valley, T1 12 % low with a slide of 12-14 % (published
+    uncertain). Entered into the scatter of successive estimates with the estimator's 5 % they
+    made the right estimates after them (T1 within 1 %, +- 1.6 %) look scattered by three of their
+    errors: published at +- 5-7 %, every well-excited refit from 155 to 225 s refused. Entered with
+    their own slide, those are trusted."""
+    records, sim = _bench_case(799606246, 230.0)
+    later = [r for r in records if 160.0 <= r.time <= 230.0]
+    assert len(later) >= 14
+    assert sum(r.new_estimate and r.status == "OK" for r in later) >= len(later) - 1
+    for r in later:
+        parameters, errors = r.estimate["parameters"], r.estimate["std_errors"]
+        assert abs(parameters["T1"] / sim.truth["T1"] - 1) < 0.03
+        assert errors["T1"] < 0.03 * parameters["T1"]
+
+
+def test_windows_sliding_off_the_steps_that_taught_them_keep_their_own_errors():
+    """bench vessels' seed 799606292 USV (T1 1.72 s, mixed manoeuvre at 2x noise): from 305 s its
+    windows slide off the steps onto straight legs, and successive estimates move 1-2 % in T1 with
+    errors of 2 %, far more than the 5 s the windows do not share would allow (time shares: T1 at
+    +- 4.4-5.1 %, every refit from 325 to 395 s refused). Judged by where each fit learnt T1 (its
+    ``Influence``), the well-determined ones are trusted, and they are right."""
+    records, sim = _bench_case(799606292, 400.0)
+    later = [r for r in records if 340.0 <= r.time <= 400.0]
+    trusted = [r for r in later if r.new_estimate and r.status == "OK"]
+    assert len(trusted) >= 0.75 * len(later)
+    for r in trusted:
+        assert abs(r.estimate["parameters"]["T1"] / sim.truth["T1"] - 1) < 0.05
+
+
 @pytest.mark.slow
 def test_a_well_determined_window_is_used_whatever_its_yaw_rate_spread():
     """Random rudder steps of at most 3 deg: a yaw-rate spread of 3-4 noise levels (the old rule

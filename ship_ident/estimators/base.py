@@ -43,6 +43,23 @@ class Solution:
     residual: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class Influence:
+    """Where in time a fit learnt its parameters: each free parameter's share of its variance
+    from each sample (squared rows of J (J'J)^-1, heading and yaw rate together; they sum to one),
+    kept as cumulative sums at the fit's sample times (s). Information is seldom spread evenly:
+    a window of steps followed by a straight leg learnt T1 from the steps alone."""
+
+    time: np.ndarray  # s
+    cumulative: dict  # parameter -> cumulative share at each sample time (ends at 1)
+
+    def share_within(self, name: str, start: float, end: float) -> float:
+        """The share of ``name``'s variance learnt from the samples within [start, end] s."""
+        c = self.cumulative[name]
+        a, b = np.searchsorted(self.time, start, "left"), np.searchsorted(self.time, end, "right")
+        return float((c[b - 1] if b > 0 else 0.0) - (c[a - 1] if a > 0 else 0.0))
+
+
 @dataclass
 class Estimate:
     """Identified parameters with their standard errors, fit figures and flags."""
@@ -56,6 +73,7 @@ class Estimate:
     flags: list = field(default_factory=list)
     info: dict = field(default_factory=dict)
     window: tuple = (0.0, 0.0)
+    influence: Influence | None = field(default=None, repr=False, compare=False)  # a search's, not a regression's
 
     @property
     def ok(self) -> bool:

@@ -60,7 +60,7 @@ from scipy import sparse
 from ..dataset import Dataset, cut_segments
 from ..noise import robust_std
 from ..structure import Structure
-from .base import Estimate, Estimator, finish_estimate, fit_substeps, scaled_inverse
+from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
 
 MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
@@ -173,7 +173,7 @@ def _dense(a) -> np.ndarray:
     return a.toarray() if sparse.issparse(a) else a
 
 
-def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> tuple[np.ndarray, np.ndarray]:
+def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> tuple[np.ndarray, ...]:
     """Heteroscedasticity-and-autocorrelation-consistent (Newey-West) standard errors of the
     first ``p`` unknowns: bread (J'J)^-1 (``scaled_inverse``), meat the Bartlett-weighted long-run covariance of
     the per-sample scores J_k' f_k (heading and yaw-rate rows of one sample summed), lags up
@@ -182,19 +182,22 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     covariance is taken of the p-dimensional projected scores: u' W u with W the Toeplitz
     matrix of the Bartlett weights, W u one convolution (FFT for long lag windows), so the
     cost is linear in the samples. ``J`` may be a scipy sparse matrix. Also returns the plain
-    Gauss-Newton errors sqrt(diag (J'J)^-1) (white residuals of unit variance)."""
+    Gauss-Newton errors sqrt(diag (J'J)^-1) (white residuals of unit variance) and each sample's
+    share of their variances (``Influence``: n_samples x p, columns summing to one)."""
     from scipy.signal import convolve  # here: scipy.signal takes seconds to import
 
     try:
         bread = scaled_inverse(_dense(J.T @ J))[:p]
     except np.linalg.LinAlgError:
-        return np.full(p, np.inf), np.full(p, np.inf)
+        return np.full(p, np.inf), np.full(p, np.inf), np.full((n_samples, p), 1.0 / n_samples)
     projected = np.asarray(J @ bread.T)
+    squares = projected[:n_samples] ** 2 + projected[n_samples:] ** 2
+    shares = squares / np.maximum(squares.sum(axis=0), 1e-300)
     u = projected[:n_samples] * f[:n_samples, None] + projected[n_samples:] * f[n_samples:, None]
     lags = np.arange(-min(bandwidth, n_samples - 1), min(bandwidth, n_samples - 1) + 1)
     bartlett = 1.0 - np.abs(lags) / (bandwidth + 1.0)
     meat = u.T @ convolve(u, bartlett[:, None], mode="same")
-    return np.sqrt(np.clip(np.diag(meat), 0, None)), np.sqrt(np.clip(np.diag(bread[:, :p]), 0, None))
+    return np.sqrt(np.clip(np.diag(meat), 0, None)), np.sqrt(np.clip(np.diag(bread[:, :p]), 0, None)), shares
 
 
 HUBER_THRESHOLD = 5.0  # robust standard deviations beyond which a residual counts linearly
@@ -568,10 +571,11 @@ class OutputError(Estimator):
             )
             iterations += valley_iterations + result.iterations
         params, _ = unpack(result.x)
-        std, gauss_newton = parameter_std_errors(
+        std, gauss_newton, shares = parameter_std_errors(
             result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(intervals)
         )
         std_errors = {n: float(s) for n, s in zip(names, std)}
+        cumulative = dict(zip(names, np.cumsum(shares, axis=0).T))
         std_errors.update({n: 0.0 for n in structure.fixed_names})
         flags = [
             f
@@ -594,6 +598,7 @@ class OutputError(Estimator):
         if "T2" in names and params["T2"] > params["T1"]:  # the model is symmetric in them: T1 >= T2
             params["T1"], params["T2"] = params["T2"], params["T1"]
             std_errors["T1"], std_errors["T2"] = std_errors["T2"], std_errors["T1"]
+            cumulative["T1"], cumulative["T2"] = cumulative["T2"], cumulative["T1"]
         if "T2" in names and np.isclose(params["T1"], params["T2"], rtol=AT_BOUND_SHARE):
             # the poles met: the search sits on the fold T1 = T2 of the symmetric pair, at the edge
             # of real time constants; their sum and product are determined there, neither alone
@@ -615,4 +620,5 @@ class OutputError(Estimator):
             "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
             "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
         }
-        return finish_estimate(structure, dataset, self.name, params, std_errors, flags, info)
+        estimate = finish_estimate(structure, dataset, self.name, params, std_errors, flags, info)
+        return replace(estimate, influence=Influence(dataset.time, cumulative))

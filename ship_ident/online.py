@@ -514,7 +514,8 @@ class OnlineIdentifier:
         start_up = not (full or self._full_window_fitted)  # a short window, no history of estimates
         # its own errors, T1's with its slide along the T2 = T3 valley: so it enters the scatter of the
         # next estimates (a start-up fit at the valley's foot, T1 12 % off with a slide of 13 %, made
-        # the right ones after it look scattered by 3 of their errors: bench vessels seed 799606246)
+        # the right ones after it look scattered by 3 of their errors: bench vessels seed 799606246);
+        # whether T2 is told from zero is judged on the window's own T2 error, not the scatter's
         estimate = replace(
             estimate, std_errors=first_order_valley(estimate, estimate.std_errors, estimator, structure, dataset)
         )
@@ -829,10 +830,11 @@ class EstimateScatter:
         pairs = {name: [] for name in estimate.parameters}  # (d^2 / U, 2 / U)
         for i, a in enumerate(chain_):
             for b in chain_[i + 1 :]:
+                (a_shares, a_time), (b_shares, b_time) = _shared_shares(a, b), _shared_shares(b, a)
                 for name, rows in pairs.items():
                     va, vb = a.std_errors.get(name, 0.0) ** 2, b.std_errors.get(name, 0.0) ** 2
                     if va + vb > 0 and math.isfinite(va + vb) and name in a.parameters:
-                        ia, ib = _shared_share(a, b, name), _shared_share(b, a, name)
+                        ia, ib = a_shares.get(name, a_time), b_shares.get(name, b_time)
                         apart = va * (1 - ia) + vb * (1 - ib) + (math.sqrt(va * ia) - math.sqrt(vb * ib)) ** 2
                         unit = max(apart, MIN_FRESH_SHARE * (va + vb))
                         rows.append(((b.parameters[name] - a.parameters[name]) ** 2 / unit, 2.0 / unit))
@@ -845,6 +847,20 @@ class EstimateScatter:
             phi_square, sigma_square = components.get(name, (1.0, 0.0))
             honest[name] = math.sqrt(phi_square * std**2 + sigma_square)
         return honest
+
+
+def _shared_shares(a, b) -> tuple[dict, float]:
+    """The shares of estimate ``a``'s variances learnt within ``b``'s window: {parameter: share}
+    from its ``Influence`` (none without one), and the share of its window's time, for the
+    parameters it has no influence of."""
+    start, end = b.window
+    overlap = max(0.0, min(a.window[1], end) - max(a.window[0], start))
+    time_share = overlap / max(a.window[1] - a.window[0], 1e-9)
+    if a.influence is None:
+        return {}, time_share
+    return {
+        name: min(max(share, 0.0), 1.0) for name, share in a.influence.shares_within(start, end).items()
+    }, time_share
 
 
 def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset) -> dict:
@@ -942,16 +958,6 @@ def cubic_damping_slides(estimate, std_errors: dict, estimator, structure, datas
     ]
     slides = profile_slides(estimate, estimator, structure, dataset, "alpha", ladders, ("K", main))
     return dict(std_errors, **{q: max(std_errors[q], slides[q]) for q in slides})
-
-
-def _shared_share(a, b, name: str) -> float:
-    """The share of estimate ``a``'s variance of ``name`` learnt within ``b``'s window (its
-    ``Influence``; without one, the share of its window's time)."""
-    start, end = b.window
-    if a.influence is not None and name in a.influence.cumulative:
-        return min(max(a.influence.share_within(name, start, end), 0.0), 1.0)
-    overlap = max(0.0, min(a.window[1], end) - max(a.window[0], start))
-    return overlap / max(a.window[1] - a.window[0], 1e-9)
 
 
 def _drift_and_own_error(rows: list) -> tuple[float, float]:

@@ -557,26 +557,13 @@ def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
 
 
 def _bench_case(seed: int, until: float):
-    """The records of bench vessels' case ``seed`` (quick) up to ``until`` s, and its truth; the
-    bench's whole record is simulated (its noise is drawn over all of it)."""
+    """The records of bench vessels' case ``seed`` (quick) up to ``until`` s, and its record."""
     from ship_ident.bench.peers import dataset_samples
 
     case = vessels.draw_case(seed, quick=True)
-    vessel, config = case["vessel"], case["config"]
-    change = None
-    if case["step"]:
-        change = (case["change_time"], {k: f * vessel.parameters[k] for k, f in vessels.CHANGE.items()})
-    sim = simulate(
-        case["maneuver"],
-        vessel,
-        duration=case["duration"],
-        sample_time=config.sample_time,
-        noise=Noise().scaled(case["noise"]),
-        seed=seed,
-        change=change,
-    )
-    samples = [s for s in dataset_samples(sim.dataset) if s.time <= until]
-    return list(run_schedule(OnlineIdentifier(config), samples)), sim
+    sim = vessels.simulate_case(case)
+    samples = [s for s in dataset_samples(sim.dataset) if s.time <= until]  # as the bench, from 0 s
+    return list(run_schedule(OnlineIdentifier(case["config"]), samples)), sim
 
 
 def test_a_biased_start_up_estimate_does_not_make_the_right_ones_after_it_look_scattered():
@@ -808,22 +795,10 @@ def test_a_loose_full_fit_after_a_change_does_not_replace_the_followed_gain():
     T1 loose, and one gave K 7 % off with its error within the trusted 3 %. Published as
     uncertain_estimate it replaced the followed K until 379 s; now the followed K is kept until a
     full fit is trusted, and the K in force stays within 5 % once it got there."""
-    from ship_ident.bench.peers import dataset_samples, recovery_time
+    from ship_ident.bench.peers import recovery_time
 
-    case = vessels.draw_case(3441109605, quick=True)
-    config, change = case["config"], case["change_time"]
-    truth = case["vessel"].parameters
-    sim = simulate(
-        case["maneuver"],
-        case["vessel"],
-        duration=case["duration"],  # the bench's record (its noise drawn over the whole of it)
-        sample_time=config.sample_time,
-        noise=Noise().scaled(case["noise"]),
-        seed=3441109605,
-        change=(change, {"K": 0.7 * truth["K"], "T1": 1.3 * truth["T1"]}),
-    )
-    samples = [s for s in dataset_samples(sim.dataset) if s.time <= change + 110.0]  # as the bench, from 0 s
-    records = list(run_schedule(OnlineIdentifier(config), samples))
+    change = vessels.draw_case(3441109605, quick=True)["change_time"]
+    records, sim = _bench_case(3441109605, change + 110.0)
     k_new = sim.info["truth_after"]["K"]
     times, ks = k_trace(records)
     recovered = recovery_time(times, ks, change, k_new)

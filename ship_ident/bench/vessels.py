@@ -114,23 +114,31 @@ def draw_case(seed: int, quick: bool = False) -> dict:
     }
 
 
+def simulate_case(case: dict):
+    """The record of a drawn case (``draw_case``): its manoeuvre at its noise over its whole
+    duration, with its change if it has one (a replay of part of a case must simulate all of it:
+    the noise is drawn over the whole record)."""
+    vessel = case["vessel"]
+    change = None
+    if case["step"]:
+        change = (case["change_time"], {k: f * vessel.parameters[k] for k, f in CHANGE.items()})
+    return simulate(
+        case["maneuver"],
+        vessel,
+        duration=case["duration"],
+        sample_time=case["config"].sample_time,
+        noise=Noise().scaled(case["noise"]),
+        seed=case["seed"],
+        change=change,
+    )
+
+
 def run_case(seed: int, quick: bool = False) -> dict:
     """Simulate the case, replay it through the online core and judge every refit (plain data)."""
     case = draw_case(seed, quick)
     vessel, config = case["vessel"], case["config"]
     noise = Noise().scaled(case["noise"])
-    change = None
-    if case["step"]:
-        change = (case["change_time"], {k: f * vessel.parameters[k] for k, f in CHANGE.items()})
-    sim = simulate(
-        case["maneuver"],
-        vessel,
-        duration=case["duration"],
-        sample_time=config.sample_time,
-        noise=noise,
-        seed=seed,
-        change=change,
-    )
+    sim = simulate_case(case)
     truth_after = sim.info.get("truth_after", sim.truth)
     refits = []
     identifier = OnlineIdentifier(config)

@@ -53,11 +53,13 @@ class Influence:
     time: np.ndarray  # s
     cumulative: dict  # parameter -> cumulative share at each sample time (ends at 1)
 
-    def share_within(self, name: str, start: float, end: float) -> float:
-        """The share of ``name``'s variance learnt from the samples within [start, end] s."""
-        c = self.cumulative[name]
+    def shares_within(self, start: float, end: float) -> dict:
+        """{parameter: the share of its variance learnt from the samples within [start, end] s}."""
         a, b = np.searchsorted(self.time, start, "left"), np.searchsorted(self.time, end, "right")
-        return float((c[b - 1] if b > 0 else 0.0) - (c[a - 1] if a > 0 else 0.0))
+        return {
+            name: float((c[b - 1] if b > 0 else 0.0) - (c[a - 1] if a > 0 else 0.0))
+            for name, c in self.cumulative.items()
+        }
 
 
 @dataclass

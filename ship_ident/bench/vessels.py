@@ -24,7 +24,7 @@ Figures, all against the simulated truth:
   ``WELL_EXCITED['K']`` and T1 within ``WELL_EXCITED['T1']`` (relative std; half the
   errors the node trusts), whatever its signal-to-noise ratios; any refit there that does not give a
   new OK estimate is rejected, and its conditions are counted, and those before a full window
-  (start-up, where the node trusts half the errors);
+  (start-up, where the node checks K and T1 along the cubic damping from half the errors it trusts);
 * after the step change: the time until the K in force is back within 5 %
   of the new truth and stays there (``peers.recovery_time``), median (also apart for
   hulls with T1 up to ``QUICK_HULL_T1``, whose target is 60 s, and for slower ones), worst,
@@ -469,7 +469,7 @@ def render(result: dict) -> str:
         f"well-excited windows (CRB relative std K <= {100 * crb['K']:.0f} %, T1 <= "
         f"{100 * crb['T1']:.0f} %) on steady vessels: {we['rejected']} of {we['refits']} refits "
         f"rejected ({100 * we['share_rejected']:.1f} %, target <= 5 %), {we['rejected_start_up']} of them "
-        f"before a full window (start-up: trusted within half the errors); conditions: "
+        f"before a full window (start-up); conditions: "
         + (", ".join(f"{c} {n}" for c, n in we["reasons"].items()) or "-")
     )
     rc = s["recovery"]

@@ -311,6 +311,22 @@ def test_a_step_case_counts_for_recovery_when_its_new_data_determine_k():
     assert vessels.determined_after_change(case)
 
 
+def test_a_window_whose_lead_can_cancel_either_pole_is_not_counted_as_well_excited():
+    """``bench vessels`` seed 1764177411 (a USV with T2 1.16 s, T3 1.23 s in steady turns): at 120 s
+    the window's Cramer-Rao bound puts T1 within 0.6 %, but the lead that cancels the fast pole can
+    cancel the slow one instead, and T1 held 10 % either side of the truth fits as well (chi2 rise
+    about 0.1): the window does not determine T1, and its refused refits are not counted as
+    rejected well-excited ones. On a hull without that valley (seed 1764177390, steps) the same
+    profile rises far past the 95 % region (chi2 58 and 65)."""
+    identifier, truth = _fed_identifier(1764177411, 120.0, whole=True)
+    assert vessels._t1_profile_rise(identifier, 120.0, truth) < vessels.WELL_EXCITED_PROFILE_RISE
+    identifier, truth = _fed_identifier(1764177390, 150.0, whole=True)
+    assert vessels._t1_profile_rise(identifier, 150.0, truth) > 25.0
+    crb = {"K": 0.004, "T1": 0.006}
+    assert vessels.well_excited({"crb": crb, "t1_profile_rise": None})  # a step case: the bound alone
+    assert not vessels.well_excited({"crb": crb, "t1_profile_rise": 0.1})
+
+
 def test_bench_vessels_fixed_seed_sample_against_the_truth():
     """Two USVs, quick runs (three windows): a steady one and one whose K falls 30 % mid-run."""
     cases = [vessels.run_case(seed, quick=True) for seed in (1007, 1000)]

@@ -23,7 +23,7 @@ Figures, all against the simulated truth:
   Cramer-Rao bound (``crb.py``, with the record's rudder noise) puts K within
   ``WELL_EXCITED['K']`` and T1 within ``WELL_EXCITED['T1']`` (relative std; half the
   errors the node trusts), whatever its signal-to-noise ratios, and (steady cases) T1 held
-  10 % either side of the truth raises the window's cost as a profile with that error would
+  10 % either side of the truth lies outside the 95 % region of the window's cost profile
   (``WELL_EXCITED_PROFILE_RISE``; the share by the bound alone is printed too); any refit
   there that does not give a new OK estimate is rejected, and its conditions are counted, and
   those before a full window

@@ -26,8 +26,8 @@ Figures, all against the simulated truth:
   10 % either side of the truth lies outside the 95 % region of the window's cost profile
   (``WELL_EXCITED_PROFILE_RISE``; the share by the bound alone is printed too); any refit
   there that does not give a new OK estimate is rejected, and its conditions are counted, and
-  those before a full window
-  (start-up, where the node checks K and T1 along the cubic damping from half the errors it trusts);
+  those before a full window (start-up, where the node checks K and T1 along the cubic damping
+  from half the errors it trusts);
 * after the step change: the time until the K in force is back within 5 %
   of the new truth and stays there (``peers.recovery_time``), median (also apart for
   hulls with T1 up to ``QUICK_HULL_T1``, whose target is 60 s, and for slower ones), worst,
@@ -519,9 +519,9 @@ def render(result: dict) -> str:
     we = s["well_excited"]
     crb = result["well_excited_crb"]
     lines.append(
-        f"well-excited windows (CRB relative std K <= {100 * crb['K']:.0f} %, T1 <= "
-        f"{100 * crb['T1']:.0f} %, and T1 held {100 * OFF_TOLERANCE:.0f} % either side of the truth raises "
-        f"the cost by chi2 >= {WELL_EXCITED_PROFILE_RISE:.0f}) on steady vessels: {we['rejected']} of "
+        f"well-excited windows (CRB relative std K <= {100 * crb['K']:g} %, T1 <= "
+        f"{100 * crb['T1']:g} %, and T1 held {100 * OFF_TOLERANCE:.0f} % either side of the truth raises "
+        f"the cost by chi2 >= {WELL_EXCITED_PROFILE_RISE:g}) on steady vessels: {we['rejected']} of "
         f"{we['refits']} refits rejected ({100 * we['share_rejected']:.1f} %, target <= 5 %), "
         f"{we['rejected_start_up']} of them before a full window (start-up); conditions: "
         + (", ".join(f"{c} {n}" for c, n in we["reasons"].items()) or "-")

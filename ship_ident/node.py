@@ -62,6 +62,14 @@ NODE_NAME = "ship_ident"
 # watched for a change as often (twice as often, as replay does, made the diagnosis child miss its
 # verdicts at 5x playback: test_node's gyro-bias test): the gain follow runs at most this often.
 TICKS_PER_REFIT = 5
+# Float64 inputs are stamped on arrival; two messages of one input at one clock reading share a stamp.
+# ros2 bag play --clock ticks at 40 Hz of wall time: at --rate 10 every 0.25 s of bag time, so most
+# of a 10 Hz input would be rejected as duplicates.
+STALLED_CLOCK = (
+    "{} of them arrived with the node clock where their input's previous message had left it (Float64 "
+    "inputs are stamped on arrival): with use_sim_time, /clock must advance between an input's "
+    "messages (ros2 bag play --clock-topics-all, or --clock above the play rate times the input rate)"
+)
 
 RELIABILITY = {
     name: getattr(ReliabilityPolicy, name.upper()) for name in spec(NodeSettings, "qos_reliability").options()
@@ -131,6 +139,9 @@ class IdentifierNode(Node):
         self._watching = None  # Future of the change watch between refits (queued refits wait for it)
         self._overruns = 0  # refits skipped since the last published record
         self._overrun_lock = threading.Lock()
+        self._arrivals = {}  # role: node clock reading (s) at its newest Float64 message
+        self._stalled = 0  # Float64 messages since the last refit that arrived at their input's last reading
+        self._arrival_lock = threading.Lock()
         self._callback_errors = 0
         self._type_problems = ""  # sentence about wrong-type publishers on the inputs, if any
         self._timer = None
@@ -211,7 +222,11 @@ class IdentifierNode(Node):
 
     def _on_value(self, role: str, value) -> None:
         try:
-            self.identifier.add(Sample(self._now(), role, float(value)))
+            now = self._now()
+            with self._arrival_lock:  # stamped on arrival: an unmoved clock gives a duplicate stamp
+                self._stalled += self._arrivals.get(role) == now
+                self._arrivals[role] = now
+            self.identifier.add(Sample(now, role, float(value)))
         except Exception as exc:  # a message must never stop the node
             self._report_callback_error(exc)
 
@@ -263,6 +278,8 @@ class IdentifierNode(Node):
     def _refit(self, now: float) -> None:
         """Worker thread: refit and publish; any failure is reported, never raised."""
         try:
+            with self._arrival_lock:  # read as the refit counts its rejected samples: a long fit overlaps
+                stalled, self._stalled = self._stalled, 0  # the next period's messages
             record = self.identifier.refit(now)
             effects = self.diagnosis.after_refit(record, self.identifier)
             if effects is not None:
@@ -274,6 +291,8 @@ class IdentifierNode(Node):
                     f"{overruns} refit(s) skipped: the previous refit was still running; "
                     "raise refit_period or choose a faster method"
                 )
+            if stalled and "rejected_samples" in record.conditions:
+                record.conditions["rejected_samples"] += f"; {STALLED_CLOCK.format(stalled)}"
             if self._type_problems:
                 record.conditions["wrong_message_type"] = self._type_problems
             if record.new_estimate and self.estimate_log is not None:

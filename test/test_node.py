@@ -221,6 +221,7 @@ def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
     rejected = " ".join(reported.get("rejected_samples", []))
     for word in ("non-finite", "absurd", "duplicate", "out-of-order"):
         assert word in rejected, reported
+    assert "arrived with the node clock where their input's previous message had left it" in rejected, reported
     assert "stale_input" in reported and "yaw_rate" in reported["stale_input"][0]
     assert "gap_in_window" in reported
     assert "clock_jump" in reported

@@ -76,22 +76,30 @@ class Player:
         return True
 
     def play(self, samples, rate: float = 1.0, loop: bool = False) -> None:
-        """Publish time-ordered samples at ``rate`` x real time, /clock before each stamp."""
+        """Publish time-ordered samples at ``rate`` x real time, /clock before each stamp, half-way
+        from the previous one: /clock and the inputs are separate topics, which DDS does not order
+        between them; published together, an input overtaking its clock message was stamped with
+        the previous reading by a node stamping on arrival, and rejected as a duplicate."""
         if rate <= 0:
             raise ValueError(f"--rate must be > 0, got {rate}")
         start, stop = samples[0].time, samples[-1].time
         period = stop - start + (samples[1].time - start if len(samples) > 1 else 0.1)
         offset = 0.0
         wall0 = time.monotonic()
+
+        def wait_until(stamp: float) -> None:
+            delay = wall0 + (stamp - start) / rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+
+        clock = None
         while True:
-            clock = None
             for sample in samples:
                 stamp = sample.time + offset
                 if stamp != clock:
-                    delay = wall0 + (stamp - start) / rate - time.monotonic()
-                    if delay > 0:
-                        time.sleep(delay)
+                    wait_until(stamp if clock is None else (clock + stamp) / 2)
                     self.publish_clock(stamp)
+                    wait_until(stamp)
                     clock = stamp
                 self.publish(sample.role, sample.value)
             if not loop:

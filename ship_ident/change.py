@@ -147,10 +147,11 @@ class ChangeDetector:
         self.ratio = ratio  # mean-square ratio (dimensionless); 0: never
         self.length = length  # s
         self.short = short  # s, the newest data of the quick test (one refit period)
-        self.references = deque()  # (window end s, parameters, usual level (rad/s)^2), oldest first
+        self.references = deque()  # (window end s, parameters, usual level (rad/s)^2, standard errors)
         self.votes = 0
         self.short_votes = 0
         self.base = None  # parameters of the reference the last change was declared against, or None
+        self.base_errors = {}  # its published standard errors
 
     def calibrate(self, structure: Structure, estimate, dataset: Dataset) -> None:
         """Learn the usual error level of a just-accepted estimate on its own (full) window; an
@@ -169,12 +170,13 @@ class ChangeDetector:
         errors = block_errors(structure, params, dataset, blocks, lead=n)
         if len(errors):
             floor = max(dataset.noise_std("yaw_rate", 0.0) ** 2, MIN_LEVEL)
-            self.references.append((float(dataset.time[-1]), params, max(float(np.median(errors)), floor)))
+            level = max(float(np.median(errors)), floor)
+            self.references.append((float(dataset.time[-1]), params, level, dict(estimate.std_errors)))
 
     def forget(self) -> None:
         self.references.clear()
         self.votes = self.short_votes = 0
-        self.base = None
+        self.base, self.base_errors = None, {}
 
     def _reference(self, before: float, drop: bool = True):
         """The newest reference fitted on data ending at or before ``before`` (s), or None; older
@@ -242,9 +244,9 @@ class ChangeDetector:
     def _declare(self, structure: Structure, dataset: Dataset, reference) -> float:
         """A change against ``reference``: the references are forgotten, its parameters kept as
         ``base``, and the time (s) the error stepped up in the newest 2 ``length`` s is returned."""
-        _, params, level = reference
+        _, params, level, errors = reference
         self.forget()
-        self.base = params
+        self.base, self.base_errors = params, errors
         start, stop = dataset.segments[-1]
         n = int(round(self.length / dataset.sample_time))
         a = max(start, stop - 2 * n)
@@ -277,6 +279,27 @@ def fit_gain(
     determines K sooner after a rudder step (bench peers --quick, random: K and T1 to 8 % 3.2 s
     after the step, to 11 % on the yaw rate alone)."""
     return fit_gain_and_cost(structure, params, dataset, blocks, names, iterations)[:2]
+
+
+def with_held_errors(
+    structure: Structure, params: dict, errors: dict, held_errors: dict, dataset: Dataset, blocks: tuple
+) -> dict:
+    """``errors`` of the parameters ``fit_gain`` fitted (those in ``errors``) widened by the errors of
+    the ones it held (``held_errors``, standard errors): each held parameter moved by its error
+    (towards the inside of its bounds) and the fitted ones refitted from ``params``; their shifts add
+    in quadrature (the held errors taken as independent)."""
+    names = tuple(errors)
+    variances = {n: errors[n] ** 2 for n in names}
+    for held in [h for h in structure.free_names if h not in errors and h in params]:
+        sigma = held_errors.get(held, 0.0)
+        if not (math.isfinite(sigma) and sigma > 0):
+            continue
+        (lower,), (upper,) = structure.bounds([held])
+        value = params[held] + sigma if params[held] + sigma <= upper else max(params[held] - sigma, lower)
+        moved, _ = fit_gain(structure, dict(params, **{held: value}), dataset, blocks, names, iterations=3)
+        for n in names:
+            variances[n] += (moved[n] - params[n]) ** 2
+    return {n: math.sqrt(v) for n, v in variances.items()}
 
 
 def fit_gain_and_cost(

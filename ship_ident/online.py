@@ -35,6 +35,7 @@ from .change import (
     block_errors,
     covering_blocks,
     fit_gain,
+    with_held_errors,
 )
 from .dataset import DataError, Dataset, resample_series
 from .estimators import make_estimator
@@ -594,11 +595,15 @@ class OnlineIdentifier:
         rudder determines it);
         published when they determine K (standard error within MAX_RELATIVE_ERRORS, however little the
         rudder moves) and pass the checks of any new estimate, judged against the held hull (with the
-        last good estimate's errors)."""
+        last good estimate's errors), with errors widened by the held hull's (``with_held_errors``:
+        the data's own alone covered the new K in half the follow refits of a bench vessels draw)."""
         record.window = (float(dataset.time[0]), float(dataset.time[-1]))
         if dataset.n_samples < MIN_GAIN_SAMPLES:
             return
-        held = self._change.base or last_good.parameters
+        if self._change.base:
+            held, held_errors = self._change.base, self._change.base_errors
+        else:
+            held, held_errors = last_good.parameters, last_good.std_errors
         time_constant = held.get("T1", held.get("T"))
         if dataset.duration < GAIN_FIT_SPAN * time_constant:
             return
@@ -611,6 +616,8 @@ class OnlineIdentifier:
                 loose = loose_parameters({n: params[n] for n in errors}, errors, MAX_RELATIVE_ERRORS)[1]
                 if not loose:
                     break
+            # what the new data determine is judged by their own errors; the held hull's add to them
+            errors = with_held_errors(structure, params, errors, held_errors, dataset, blocks)
             psi, r = structure.simulate(params, dataset)
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record.conditions["refit_failed"] = f"gain refit after the change: {type(exc).__name__}: {exc}"
@@ -620,7 +627,7 @@ class OnlineIdentifier:
             structure,
             last_good.method,
             params,
-            dict(last_good.std_errors, **errors),
+            dict(held_errors, **errors),
             fit,
             dataset.n_samples,
             flags=["diverged"] if fit["diverged"] else [],

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ship_ident.bench import vessels
-from ship_ident.change import ChangeDetector, variance_change_point
+from ship_ident.change import ChangeDetector, covering_blocks, fit_gain, variance_change_point, with_held_errors
 from ship_ident.estimate_log import EstimateLog
 from ship_ident.estimators.base import Estimate
 from ship_ident.io import Sample
@@ -283,6 +283,36 @@ def test_a_hull_changed_while_coasting_is_found_as_its_rudder_moves_and_restarte
             found = end
             break
     assert found == 249.5 and abs(changed_at - 240.0) <= 2.0
+
+
+def test_the_followed_gain_carries_the_errors_of_the_hull_held_under_it():
+    """K refitted on 40 s of seed 001's loaded hull with the rest held from a reference: the held
+    parameters' own errors move it, and its published error says by how much. Hulls drawn within
+    those errors (10 % each of T1, T2, T3, the cubic damping and the rudder offset) give K's that
+    scatter as the widened error says beyond the data's own (their ratio within 0.7-1.4 over
+    40 draws: 1.06); the data's own error alone is 60 times smaller (0.03 % against 1.6 %)."""
+    structure = OnlineConfig().structure()
+    sim = simulate("random", duration=300.0, seed=31, change=(240.0, LOADED))
+    new = sim.dataset.slice(*np.searchsorted(sim.dataset.time, [240.0, 280.0]))
+    truth = {name: sim.info["truth_after"][name] for name in structure.parameter_names}
+    held_errors = {name: 0.1 * abs(truth[name]) for name in ("T1", "T2", "T3", "alpha", "delta_r")}
+    blocks = covering_blocks(new, int(round(30.0 / new.sample_time)))
+    fitted, own = fit_gain(structure, truth, new, blocks, ("K",))
+    widened = with_held_errors(structure, fitted, own, held_errors, new, blocks)
+    predicted = math.sqrt(widened["K"] ** 2 - own["K"] ** 2)
+    rng = np.random.default_rng(5)
+    drawn = [
+        fit_gain(
+            structure,
+            dict(truth, **{n: truth[n] + rng.normal(0.0, e) for n, e in held_errors.items()}),
+            new,
+            blocks,
+            ("K",),
+        )[0]["K"]
+        for _ in range(40)
+    ]
+    assert 0.7 < np.std(drawn, ddof=1) / predicted < 1.4
+    assert predicted > 3 * own["K"]
 
 
 def test_effects_accept_comma_text():

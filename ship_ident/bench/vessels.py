@@ -34,7 +34,8 @@ Figures, all against the simulated truth:
   and the share beyond one window plus one refit period; the K error before
   the change (RMS over the last two thirds of a window); the share beyond also over the
   step cases whose data after the change determine K (``determined_after_change``), the
-  others listed by seed;
+  others listed by seed; the 95 % coverage of the new truth by the estimates published (WARN)
+  while the gain is followed after a change;
 * false ``vessel_changed`` per hour of steady data (changes declared, not the records that
   repeat one while the gain follows it).
 
@@ -286,6 +287,7 @@ def summarise(cases: list[dict]) -> dict:
     reasons: dict[str, int] = {}
     recoveries, errors_before, beyond, quick_hull, undetermined, beyond_determined = [], [], [], [], [], []
     changed, steady_hours = 0, 0.0
+    followed = {"K": [], "T1": []}  # new estimates after a step while its vessel_changed note stands
     for case in cases:
         for refit in case["refits"]:
             published = refit["new"] and refit["status"] == "OK"
@@ -311,6 +313,11 @@ def summarise(cases: list[dict]) -> dict:
                     for c in refit["conditions"] or ["new estimate not OK"]:
                         reasons[c] = reasons.get(c, 0) + 1
         if case["step"]:
+            for refit in case["refits"]:
+                if refit["new"] and "vessel_changed" in refit["conditions"] and refit["time"] > case["change_time"]:
+                    for q in followed:
+                        error = abs(refit["parameters"][q] - case["truth_after"][q])
+                        followed[q].append(error <= 1.96 * refit["std_errors"].get(q, math.nan))
             recovery, error_before = _recovery(case)
             recoveries.append(recovery)
             quick_hull.append(case["truth"]["T1"] <= QUICK_HULL_T1)
@@ -358,6 +365,8 @@ def summarise(cases: list[dict]) -> dict:
             "error_before_percent_median": float(np.nanmedian(errors_before)) if errors_before else math.nan,
             "error_before_percent_worst": float(np.nanmax(errors_before)) if errors_before else math.nan,
             "undetermined_seeds": undetermined,
+            "followed_refits": len(followed["K"]),
+            "followed_coverage": {q: _share(v) for q, v in followed.items()},
         },
         "false_changes_per_hour": changed / steady_hours if steady_hours else math.nan,
         "steady_hours": steady_hours,
@@ -540,6 +549,9 @@ def render(result: dict) -> str:
         f"{100 * rc['share_beyond_window_determined']:.0f} %; the data of {len(rc['undetermined_seeds'])} "
         f"never do (K's bound above {100 * WELL_EXCITED['K']:g} % in every window after it)"
         + (f": seeds {', '.join(map(str, rc['undetermined_seeds']))}" if rc["undetermined_seeds"] else "")
+        + f"; the estimates published (WARN) while a change's gain is followed: 95 % coverage of the new "
+        f"truth K {rc['followed_coverage']['K']:.3f}, T1 {rc['followed_coverage']['T1']:.3f} over "
+        f"{rc['followed_refits']} refits"
     )
     lines.append(
         f"false vessel_changed: {s['false_changes_per_hour']:.2f} per hour over "

@@ -871,6 +871,22 @@ def test_a_model_whose_gain_is_loosely_known_is_no_change_reference():
     assert all(r.status == "OK" for r in records if 260.0 <= r.time <= 300.0)
 
 
+def test_a_change_in_a_steady_turn_is_placed_where_it_happened_when_t1_cannot_be_refitted():
+    """bench vessels' seed 1764177395 USV (steady turns, cubic damping 7.5) loses 30 % of K at 270 s,
+    found at 295 s. Locating it refits K and T1 after each candidate time; on the steady turn that
+    search diverged (T1 to its bounds, free runs blowing up) at every candidate but the earliest,
+    and the window restarted at 244 s: K followed on 26 s of the old hull ran 12-28 % high. The
+    K-alone fit, a point of the same model, stands in where the search over both fails: the
+    restart lies within 10 s of the change and K is within 5 % from the alarm on."""
+    change = 270.0
+    records, sim = _bench_case(1764177395, 300.0)
+    k_new = sim.info["truth_after"]["K"]
+    alarm = next(i for i, r in enumerate(records) if "vessel_changed" in r.conditions)
+    restart = float(re.search(r"restarts at ([0-9.]+) s", records[alarm].conditions["vessel_changed"]).group(1))
+    assert abs(restart - change) <= 10.0
+    assert all(abs(r.estimate["parameters"]["K"] / k_new - 1) < 0.05 for r in records[alarm:])
+
+
 def test_a_steady_turn_that_determines_the_gain_alone_is_a_change_reference():
     """bench vessels' seed 1747880361 USV (steady turns, T1 1.85 s) loses 30 % of K at 270 s: its
     full windows know K within 0.3 % and T1 only within 8-20 % (published uncertain). As change

@@ -139,9 +139,8 @@ class IdentifierNode(Node):
         self._watching = None  # Future of the change watch between refits (queued refits wait for it)
         self._overruns = 0  # refits skipped since the last published record
         self._overrun_lock = threading.Lock()
-        self._arrivals = {}  # role: node clock reading (s) at its newest Float64 message
-        self._stalled = 0  # Float64 messages since the last refit that arrived at their input's last reading
-        self._arrival_lock = threading.Lock()
+        self._stalled = 0  # Float64 messages since the last refit rejected as duplicates: the clock stood still
+        self._stall_lock = threading.Lock()
         self._callback_errors = 0
         self._type_problems = ""  # sentence about wrong-type publishers on the inputs, if any
         self._timer = None
@@ -222,11 +221,9 @@ class IdentifierNode(Node):
 
     def _on_value(self, role: str, value) -> None:
         try:
-            now = self._now()
-            with self._arrival_lock:  # stamped on arrival: an unmoved clock gives a duplicate stamp
-                self._stalled += self._arrivals.get(role) == now
-                self._arrivals[role] = now
-            self.identifier.add(Sample(now, role, float(value)))
+            if self.identifier.add(Sample(self._now(), role, float(value))) == "duplicate":
+                with self._stall_lock:  # stamped on arrival: the clock stood still since its last message
+                    self._stalled += 1
         except Exception as exc:  # a message must never stop the node
             self._report_callback_error(exc)
 
@@ -278,7 +275,7 @@ class IdentifierNode(Node):
     def _refit(self, now: float) -> None:
         """Worker thread: refit and publish; any failure is reported, never raised."""
         try:
-            with self._arrival_lock:  # read as the refit counts its rejected samples: a long fit overlaps
+            with self._stall_lock:  # read as the refit counts its rejected samples: a long fit overlaps
                 stalled, self._stalled = self._stalled, 0  # the next period's messages
             record = self.identifier.refit(now)
             effects = self.diagnosis.after_refit(record, self.identifier)

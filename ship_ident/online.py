@@ -616,8 +616,9 @@ class OnlineIdentifier:
                 loose = loose_parameters({n: params[n] for n in errors}, errors, MAX_RELATIVE_ERRORS)[1]
                 if not loose:
                     break
-            # what the new data determine is judged by their own errors; the held hull's add to them
-            errors = with_held_errors(structure, params, errors, held_errors, dataset, blocks)
+            if not loose:  # what the new data determine is judged by their own errors; the held hull's
+                # add to those of a refit that may be published (a refused one is not)
+                errors = with_held_errors(structure, params, errors, held_errors, dataset, blocks)
             psi, r = structure.simulate(params, dataset)
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record.conditions["refit_failed"] = f"gain refit after the change: {type(exc).__name__}: {exc}"

@@ -302,6 +302,11 @@ def summarise(cases: list[dict]) -> dict:
                         off[q].append(error > OFF_TOLERANCE)
                         if error > worst[q][0]:
                             worst[q] = (error, case["seed"])
+            if case["step"] and refit["new"] and "vessel_changed" in refit["conditions"]:
+                if refit["time"] > case["change_time"]:
+                    for q in followed:
+                        error = abs(refit["parameters"][q] - case["truth_after"][q])
+                        followed[q].append(error <= 1.96 * refit["std_errors"].get(q, math.nan))
             if not case["step"] and _bound_excited(refit["crb"]):  # the bound alone, as before the profile
                 excited_by_bound += 1
                 rejected_by_bound += not published
@@ -313,11 +318,6 @@ def summarise(cases: list[dict]) -> dict:
                     for c in refit["conditions"] or ["new estimate not OK"]:
                         reasons[c] = reasons.get(c, 0) + 1
         if case["step"]:
-            for refit in case["refits"]:
-                if refit["new"] and "vessel_changed" in refit["conditions"] and refit["time"] > case["change_time"]:
-                    for q in followed:
-                        error = abs(refit["parameters"][q] - case["truth_after"][q])
-                        followed[q].append(error <= 1.96 * refit["std_errors"].get(q, math.nan))
             recovery, error_before = _recovery(case)
             recoveries.append(recovery)
             quick_hull.append(case["truth"]["T1"] <= QUICK_HULL_T1)

@@ -85,6 +85,22 @@ class StartContext:
     refit: Callable[[object], dict]
 
 
+T_UPPER_BOUND = 1e3  # s, the base models' upper bound on T and T1 (structure.BASE_MODELS)
+
+
+def yaw_time_constant(params: dict) -> float:
+    """The hull's dominant yaw time constant (s) in either form: T, T1 + T2, or the slow pole's
+    time of the acceleration form (1 / |a1|, c1 / |a1|), at most ``T_UPPER_BOUND``."""
+    if "T" in params:
+        return float(params["T"])
+    if "T1" in params:
+        return float(params["T1"] + params.get("T2", 0.0))
+    if "a1" in params:
+        slow = params.get("c1", 1.0) / max(abs(params["a1"]), 1e-12)
+        return float(min(slow, T_UPPER_BOUND))
+    return 1.0
+
+
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
     a = a - a.mean()
     b = b - b.mean()
@@ -107,6 +123,13 @@ class Effect:
     explanation: str = ""
     parameters: tuple[Parameter, ...] = ()
     needs_speed: bool = False
+    # the yaw damping this effect adds can hold a linear damping of either sign: the structure is
+    # fitted in the acceleration form (structure.py), where a weak or negative damping is determined
+    frees_linear_damping: bool = False
+    # parameters that scale a yaw forcing term (per unit of the yaw equation's leading coefficient)
+    forcing_parameters: tuple[str, ...] = ()
+    # effects whose term this one includes, each with {their parameter: this effect's parameter}
+    replaces: dict = {}
 
     # --- simulation hooks -------------------------------------------------
     def effective_rudder(self, time: np.ndarray, rudder: np.ndarray, p: dict) -> np.ndarray:
@@ -142,11 +165,6 @@ class Effect:
         """Values of the free parameters at which the effect does nothing: the model without it,
         where a fit with the effect can start (every effect here vanishes at zero)."""
         return {p.name: 0.0 for p in self.parameters if p.name not in getattr(self, "fixed", ())}
-
-    def base_equivalent(self, p: dict) -> dict:
-        """Base-model parameters that move most like the model with this effect at ``p``: a start
-        for refitting the model without it (here: the effect dropped, the base parameters kept)."""
-        return dict(p)
 
     def starts(self, context: StartContext) -> list[dict]:
         """Extra starting points (full parameter sets) for a fit with this effect, for parameters
@@ -201,6 +219,7 @@ class CubicYaw(Effect):
         "(or shrinks) with the cube of the turn rate"
     )
     parameters = (Parameter("alpha", "s^2/rad^2", "cubic yaw damping coefficient", 0.0, -1e7, 1e7),)
+    forcing_parameters = ("alpha",)
 
     def forcing_terms(self, p):
         return [ForcingTerm(-p["alpha"], r_power=3)]
@@ -256,7 +275,7 @@ class RudderDelay(Effect):
         tau = 0 stays there."""
         data, nested = context.training, context.nested
         upper = self.parameters[0].upper
-        time_constant = nested.get("T", nested.get("T1", 1.0) + nested.get("T2", 0.0))
+        time_constant = yaw_time_constant(nested)
         shortest = min(max(2.0 * data.sample_time, 0.05 * time_constant), upper)
         longest = float(np.clip(time_constant, shortest, upper))
         out = []
@@ -298,6 +317,7 @@ class WindYaw(Effect):
         for k in (1, 2)
         for kind in ("c", "s")
     )
+    forcing_parameters = tuple(p.name for p in parameters)
 
     def forcing_terms(self, p):
         return [ForcingTerm(p[f"wind_c{k}"], harmonic=k, trig=TRIG_COS) for k in (1, 2)] + [
@@ -415,9 +435,6 @@ class SpeedDependence(Effect):
         )
 
 
-T_UPPER_BOUND = 1e3  # s, the base models' upper bound on T and T1 (structure.BASE_MODELS)
-
-
 class CourseInstability(Effect):
     name = "course_instability"
     explanation = (
@@ -427,48 +444,38 @@ class CourseInstability(Effect):
     )
     parameters = (
         Parameter(
-            "n1",
-            "-",
-            "linear yaw damping relative to the Nomoto model's (1: as the model; below 0: course-unstable)",
-            1.0,
-            -3.0,
-            3.0,
+            "a3",
+            "s/rad^2 (nomoto1), 1/rad^2 (nomoto2)",
+            "cubic yaw damping per unit yaw inertia that bounds the unstable turn",
+            0.0,
+            0.0,
+            1e7,
         ),
-        Parameter("n3", "s^2/rad^2", "cubic yaw damping that bounds the unstable turn", 0.0, 0.0, 1e7),
     )
+    frees_linear_damping = True  # the linear damping a1 of the acceleration form, of either sign
+    forcing_parameters = ("a3",)
+    replaces = {"cubic_yaw": {"alpha": "a3"}}
 
     def forcing_terms(self, p):
-        """T r' + n1 r + n3 r^3 = K delta: the base model's r moved by (1 - n1) r - n3 r^3."""
-        return [ForcingTerm(1.0 - p["n1"], r_power=1), ForcingTerm(-p["n3"], r_power=3)]
+        return [ForcingTerm(-p["a3"], r_power=3)]
 
-    def neutral(self):
-        return {"n1": 1.0, "n3": 0.0}
+    def regressors(self, signals):
+        return {"r^3": signals.r**3}
 
     def from_coefficients(self, coefficients, base):
-        return self.neutral()
-
-    def base_equivalent(self, p):
-        """With a stable linear damping (n1 > 0) and little cubic damping the model is a Nomoto
-        model divided by n1: K / n1, T / n1 (first order), and T1, T2 the roots of
-        s^2 T1 T2 / n1 + s (T1 + T2) / n1 + 1 (second order; equal when they would be complex)."""
-        n1 = p.get("n1", 1.0)
-        if n1 <= 0.0:
-            return dict(p)
-        out = dict(p, K=p["K"] / n1)
-        if "T" in p:
-            out["T"] = p["T"] / n1
-        else:
-            total, product = (p["T1"] + p["T2"]) / n1, p["T1"] * p["T2"] / n1
-            spread = np.sqrt(max(total**2 - 4.0 * product, 0.0))
-            out["T1"], out["T2"] = (total + spread) / 2.0, max((total - spread) / 2.0, 1e-3)
-        return out
+        return {"a3": -coefficients["r^3"]}
 
     def starts(self, context):
-        """The sign of the linear damping: a search from n1 = 1 never crosses the unstable region
-        where the simulation diverges, so it also starts from n1 = 0.5, 0, -0.25 and -0.5 with
-        the cubic damping that holds the unstable turn at about half the largest measured rate."""
+        """The sign of the linear damping: a search from the stable model never crosses the region
+        where the simulation diverges, so it also starts from a1 at 0.5, 0, -0.25 and -0.5 times
+        the stable start's, with the cubic damping that holds the unstable turn at about half the
+        largest measured rate (a1 r + a3 r^3 = 0 there)."""
         r_max = float(np.max(np.abs(context.training.yaw_rate))) or 1e-3
-        return [dict(context.nested, n1=n1, n3=max(-n1, 0.05) / (0.5 * r_max) ** 2) for n1 in (0.5, 0.0, -0.25, -0.5)]
+        a1 = abs(context.nested["a1"])
+        return [
+            dict(context.nested, a1=share * a1, a3=max(-share, 0.05) * a1 / (0.5 * r_max) ** 2)
+            for share in (0.5, 0.0, -0.25, -0.5)
+        ]
 
     def evidence(self, context):
         s = context.signals
@@ -493,7 +500,18 @@ class QuadraticYaw(Effect):
         "the hull's resistance to turning grows with the square of the turn rate "
         "(cross-flow drag, as on small fast boats)"
     )
-    parameters = (Parameter("d_q", "s/rad", "quadratic yaw damping: forcing -d_q r|r|", 0.0, -1e4, 1e4),)
+    parameters = (
+        Parameter(
+            "d_q",
+            "1/rad (nomoto1), 1/(rad s) (nomoto2)",
+            "quadratic yaw damping per unit yaw inertia: forcing -d_q r|r|",
+            0.0,
+            -1e4,
+            1e4,
+        ),
+    )
+    frees_linear_damping = True  # cross-flow drag holds a hull whose linear yaw damping is weak or negative
+    forcing_parameters = ("d_q",)
 
     def forcing_terms(self, p):
         return [ForcingTerm(-p["d_q"], r_power=1, abs_power=1)]

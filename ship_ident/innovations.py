@@ -31,14 +31,6 @@ from scipy.linalg import solve_discrete_are
 
 from .integrate import advance
 
-_NO_FORCING = (
-    np.zeros(0),
-    np.zeros(0, dtype=np.int64),
-    np.zeros(0, dtype=np.int64),
-    np.zeros(0, dtype=np.int64),
-    np.zeros(0, dtype=np.int64),
-)
-
 
 @dataclass(frozen=True)
 class NoiseModel:
@@ -65,19 +57,24 @@ class NoiseModel:
 
 
 def noise_model(
-    order: int, params: dict, h: float, substeps: int, rudder_noise: float, heading_noise: float, yaw_rate_noise: float
+    structure, params: dict, h: float, substeps: int, rudder_noise: float, heading_noise: float, yaw_rate_noise: float
 ) -> NoiseModel:
-    """Linearise the compiled integrator at rest (exact: the model is linear there) for one
-    sample of length h (s)."""
-    K = params["K"]
-    T1 = params["T"] if order == 1 else params["T1"]
-    T2 = 0.0 if order == 1 else params["T2"]
-    T3 = 0.0 if order == 1 else params["T3"]
+    """Linearise the compiled integrator of ``structure`` (a ``Structure``) at rest for one sample
+    of length h (s): its linear terms only (a linear damping moved to the forcing in the
+    acceleration form); the effects' nonlinear terms vanish to first order there."""
+    order = structure.order
+    (K, T1, T2, T3), terms = structure.kernel(params)
+    linear = [t for t in terms if t.r_power == 1 and t.abs_power == 0 and t.harmonic == 0]
+    forcing = (
+        np.array([t.coefficient for t in linear], dtype=float),
+        np.ones(len(linear), dtype=np.int64),
+        *(np.zeros(len(linear), dtype=np.int64) for _ in range(3)),
+    )
     n = 2 if order == 1 else 3
 
     def step(state, d0, d1):
         psi, r, z = (list(state) + [0.0])[:3]
-        return np.array(advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, *_NO_FORCING, substeps))[:n]
+        return np.array(advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, *forcing, substeps))[:n]
 
     zero = np.zeros(n)
     A = np.column_stack([step(np.eye(n)[i], 0.0, 0.0) for i in range(n)])

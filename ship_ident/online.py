@@ -122,7 +122,9 @@ FULL_WINDOW_MARGIN = 3.0
 # to steer by (a hull whose rudder lead T3 nearly cancels T1 determines K but hardly T1); after a
 # change, one whose K is known worse than the last good estimate's is not published (a K refitted on
 # the first seconds of new data beats a full fit of a straight leg).
-TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04}
+# In the acceleration form (a hull whose linear yaw damping is weak or negative) the rudder's yaw
+# acceleration b (b0) stands for K and the dampings for the time constants.
+TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04, "b": 0.03, "b0": 0.03, "c1": 0.04, "a1": 0.1}
 # A second pole T2 that the window cannot tell from zero leaves the response nearly first order: T1 may
 # slide along the T2 = T3 valley (``first_order_valley``). The cost's profile along it is taken with T2
 # held at its floor and at these shares of T1 above the estimate (the truth may lie far beyond T2's own
@@ -560,8 +562,9 @@ class OnlineIdentifier:
             if held:
                 return
         self._publish(config, structure, estimate, published, dataset, record)
-        if full:  # a full window's model, judged by its published errors (a window straddling a change
-            # fits a mixture of two hulls whose scatter the estimator's own errors do not show)
+        if full and structure.form == "nomoto":  # a full window's model, judged by its published errors
+            # (a window straddling a change fits a mixture of two hulls whose scatter the estimator's own
+            # errors do not show); the change detector follows the gain K, which the acceleration form lacks
             self._change.calibrate(structure, published, dataset)
             self._full_window_fitted = True
         with self._lock:
@@ -798,7 +801,7 @@ def _jump(estimate, reference) -> tuple[float, str]:
     """The largest jump of the gain or main time constant between two estimates, in joint standard
     errors, and the parameter's name."""
     jumps = []
-    for name in ("K", "T", "T1"):
+    for name in TRUSTED_RELATIVE_ERRORS:
         if name in estimate.parameters and name in reference.parameters:
             joint = math.hypot(estimate.std_errors.get(name, 0.0), reference.std_errors.get(name, 0.0))
             step = abs(estimate.parameters[name] - reference.parameters[name])
@@ -956,7 +959,7 @@ def cubic_damping_slides(estimate, std_errors: dict, estimator, structure, datas
     3133699670, a ship with T1 75 s on a 20/20 zigzag: alpha 147 +- 42 for a true 26.5, the cost
     unchanged at alpha 231 with K and T1 4 % and 7 % further; T1 11 % off was published OK at
     +- 3.4 %)."""
-    if "alpha" not in estimate.parameters or not std_errors.get("alpha", 0.0) > 0:
+    if structure.form != "nomoto" or "alpha" not in estimate.parameters or not std_errors.get("alpha", 0.0) > 0:
         return std_errors
     main = "T1" if "T1" in estimate.parameters else "T"
     alpha, s_alpha = estimate.parameters["alpha"], std_errors["alpha"]

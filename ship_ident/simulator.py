@@ -319,6 +319,8 @@ def simulate(
     truth.update(parameters or {})
     if "speed_dependence" in effects:
         truth["U_ref"] = vessel.speed
+    if structure.form == "acceleration":  # the vessel's Nomoto constants and forcing, per unit yaw inertia
+        truth = {k: v for k, v in structure.in_form(truth).items() if k in structure.parameter_names}
     rng = np.random.default_rng(seed)
     cmd = _plan_commands(maneuver, vessel, duration, fine_step, rng, amplitude)
     stride = int(round(sample_time / fine_step))

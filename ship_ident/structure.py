@@ -12,16 +12,32 @@ Regression (continuous time, on smoothed derivatives, see signals.py):
 
 so w = [-T1 T2, -(T1 + T2), K, K T3, ...] and T1, T2 are the roots of
 x^2 - (T1 + T2) x + T1 T2 = 0 (T1 >= T2).
+
+The Nomoto form divides the yaw equation by its linear damping. Where that
+damping is weak (a USV in fast turns, held by quadratic drag) or negative (a
+course-unstable ship, held by its cubic damping), K and the time constants
+run off to infinity while the data still determine the equation divided by
+the yaw inertia instead. A structure with an effect that frees the linear
+damping (``Effect.frees_linear_damping``) is therefore fitted in that
+*acceleration form* (Norrbin's form, per unit yaw inertia):
+
+    nomoto1:  r'  = b delta - a1 r + G
+    nomoto2:  r'' = -c1 r' - a1 r + b0 delta + b1 delta' + G
+
+with a1 of either sign and G the effects' forcing per unit inertia. Where
+a1 > 0 it is the Nomoto model: K = b / a1, T = 1 / a1 (first order);
+K = b0 / a1, T1 T2 = 1 / a1, T1 + T2 = c1 / a1, T3 = b1 / b0 (second order),
+published beside the fitted parameters (``Structure.nomoto_parameters``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .dataset import DataError, Dataset
-from .effects import EFFECTS, Effect, Parameter
+from .effects import EFFECTS, Effect, ForcingTerm, Parameter
 from .integrate import TERM_FIELDS, simulate_kernel, substeps_for
 
 BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
@@ -36,6 +52,33 @@ BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
         Parameter("T3", "s", "rudder lead time constant", 0.1, 0.0, 1e3),
     ),
 }
+# The acceleration form's base parameters (see the module docstring): rudder gains and dampings per
+# unit yaw inertia. The rudder's yaw acceleration is positive (K > 0), the damping of r' (c1, the
+# sum of the poles) too; the linear damping a1 may take either sign.
+ACCELERATION_MODELS: dict[str, tuple[Parameter, ...]] = {
+    "nomoto1": (
+        Parameter("b", "1/s^2", "rudder's yaw acceleration per rudder angle (K / T)", 0.1, 1e-8, 1e3),
+        Parameter(
+            "a1", "1/s", "linear yaw damping per unit yaw inertia (1 / T; below 0: course-unstable)", 0.2, -10.0, 100.0
+        ),
+    ),
+    "nomoto2": (
+        Parameter("b0", "1/s^3", "rudder's yaw jerk per rudder angle (K / (T1 T2))", 0.1, 1e-8, 1e4),
+        Parameter("b1", "1/s^2", "rudder's yaw acceleration per rudder rate (K T3 / (T1 T2))", 0.0, 0.0, 1e4),
+        Parameter("c1", "1/s", "damping of the yaw acceleration ((T1 + T2) / (T1 T2))", 1.0, 1e-4, 1e3),
+        Parameter(
+            "a1",
+            "1/s^2",
+            "linear yaw damping per unit yaw inertia (1 / (T1 T2); below 0: course-unstable)",
+            0.05,
+            -100.0,
+            1e4,
+        ),
+    ),
+}
+NOMOTO_NAMES = ("K", "T", "T1", "T2", "T3")
+ACCELERATION_NAMES = ("b", "b0", "b1", "c1", "a1")
+NOMOTO_TIME_CONSTANT_LIMIT = 1e3  # s, T and T1's upper bound: a slower hull is published without them
 
 
 class StructureError(ValueError):
@@ -63,9 +106,16 @@ class Structure:
         self.model = model
         self.effect_names = tuple(effects)
         self.effects: tuple[Effect, ...] = tuple(EFFECTS[e] for e in effects)
-        self.parameters: tuple[Parameter, ...] = BASE_MODELS[model] + tuple(
-            p for e in self.effects for p in e.parameters
-        )
+        for effect in self.effects:
+            clash = [e for e in effect.replaces if e in self.effect_names]
+            if clash:
+                raise StructureError(
+                    f"{effect.name} includes {clash[0]}'s term (the same term twice has no unique fit); list one"
+                )
+        self.form = "acceleration" if any(e.frees_linear_damping for e in self.effects) else "nomoto"
+        base = ACCELERATION_MODELS[model] if self.form == "acceleration" else BASE_MODELS[model]
+        self.base_names = [p.name for p in base]
+        self.parameters: tuple[Parameter, ...] = base + tuple(p for e in self.effects for p in e.parameters)
         self.parameter_names = [p.name for p in self.parameters]
         self.fixed_names = [n for e in self.effects for n in getattr(e, "fixed", ())]
         self.free_names = [n for n in self.parameter_names if n not in self.fixed_names]
@@ -81,14 +131,61 @@ class Structure:
     def with_effects(self, effects) -> Structure:
         return Structure(self.model, list(effects))
 
+    def adding(self, effect: str) -> Structure:
+        """This structure with ``effect`` added, in place of the effects whose term it includes."""
+        replaced = EFFECTS[effect].replaces
+        return self.with_effects([e for e in self.effect_names if e not in replaced] + [effect])
+
     def neutral_effect_start(self, base: dict) -> dict:
         """A start for this structure from ``base``, the parameters of the model without some of
-        its effects: the missing effects' parameters at their neutral values, where they do
-        nothing, so the start simulates exactly as the model it came from."""
-        start = dict(base)
+        its effects (in either form): the base converted to this structure's form, the missing
+        effects' parameters at their neutral values, where they do nothing, so the start simulates
+        exactly as the model it came from (a cubic damping carried over into a course instability)."""
+        start = self.in_form(base)
         for effect in self.effects:
-            start.update({k: v for k, v in effect.neutral().items() if k not in base})
+            start.update({k: v for k, v in effect.neutral().items() if k not in start})
         return start
+
+    def in_form(self, params: dict) -> dict:
+        """``params`` (either form) with the base parameters and the effects' forcing coefficients
+        in this structure's form. Nomoto to acceleration divides the yaw equation by T (T1 T2);
+        back, by the linear damping a1, which must be positive (else the Nomoto form does not exist
+        and ``params`` are returned as they are)."""
+        out = dict(params)
+        if self.form == "acceleration" and "a1" not in params:
+            for name in NOMOTO_NAMES:
+                out.pop(name, None)
+            inertia = params["T"] if "T" in params else params["T1"] * params["T2"]
+            if self.order == 1:
+                out.update(b=params["K"] / inertia, a1=1.0 / inertia)
+            else:
+                out.update(
+                    b0=params["K"] / inertia,
+                    b1=params["K"] * params["T3"] / inertia,
+                    c1=(params["T1"] + params["T2"]) / inertia,
+                    a1=1.0 / inertia,
+                )
+            scale = 1.0 / inertia
+        elif self.form == "nomoto" and "K" not in params:
+            nomoto = nomoto_parameters(params)
+            if not nomoto:
+                return out
+            for name in ACCELERATION_NAMES:
+                out.pop(name, None)
+            out.update(nomoto)
+            scale = 1.0 / params["a1"]
+        else:
+            scale = 1.0
+        for effect in EFFECTS.values():
+            for name in effect.forcing_parameters:
+                if name in out:
+                    out[name] = out[name] * scale
+        for effect in EFFECTS.values():  # a term one effect includes of another carries over
+            for replaced, names in effect.replaces.items():
+                pairs = names.items() if effect in self.effects else [(b, a) for a, b in names.items()]
+                if effect in self.effects or replaced in self.effect_names:
+                    out.update({new: out[old] for old, new in pairs if old in out and new not in out})
+        return out
 
     def label(self) -> str:
         return "+".join((self.model,) + self.effect_names)
@@ -108,7 +205,7 @@ class Structure:
         rates the data reach)."""
         names = self.free_names if names is None else names
         limits = {n: (self.parameter(n).lower, self.parameter(n).upper) for n in names}
-        if dataset is not None:
+        if dataset is not None and self.form == "nomoto":  # data bounds are stated in the Nomoto form
             for effect in self.effects:
                 data_bounds = getattr(effect, "data_bounds", None)
                 for n, (lo, hi) in (data_bounds(dataset) if data_bounds else {}).items():
@@ -142,20 +239,13 @@ class Structure:
         default that of the fastest time constant of all runs)."""
         self.check_data(dataset)
         h = dataset.sample_time
-        names = ("T",) if self.order == 1 else ("T1", "T2")
-        substeps = substeps or substeps_for(h, min(p[n] for p in param_sets for n in names))
+        substeps = substeps or substeps_for(h, min(self.fastest_time_constant(p) for p in param_sets))
         inputs = [self.effective_inputs(p, dataset.time, dataset.rudder, dataset.speed) for p in param_sets]
         rudder, gain, tscale = (np.array([x[i] for x in inputs], dtype=float) for i in range(3))
-        terms = [[t for e in self.effects for t in e.forcing_terms(p)] for p in param_sets]
-        coef = np.array([[t.coefficient for t in ts] for ts in terms], dtype=float).reshape(len(terms), -1)
-        ints = [np.array([getattr(t, f) for t in terms[0]], dtype=np.int64) for f in TERM_FIELDS]
-        constants = np.array(
-            [
-                [p["K"], p["T"], 0.0, 0.0] if self.order == 1 else [p["K"], p["T1"], p["T2"], p["T3"]]
-                for p in param_sets
-            ],
-            dtype=float,
-        )
+        kernels = [self.kernel(p) for p in param_sets]
+        coef = np.array([[t.coefficient for t in ts] for _, ts in kernels], dtype=float).reshape(len(kernels), -1)
+        ints = [np.array([getattr(t, f) for t in kernels[0][1]], dtype=np.int64) for f in TERM_FIELDS]
+        constants = np.array([c for c, _ in kernels], dtype=float)
         bounds = np.array(dataset.segments, dtype=np.int64).reshape(-1, 2)
         if initials is None:
             initials = [
@@ -167,6 +257,31 @@ class Structure:
             self.order, h, rudder, gain, tscale, constants, bounds, initial, coef, *ints, substeps
         )
         return psi_out, np.array([self.measured_yaw_rate(r, p) for r, p in zip(r_out, param_sets)])
+
+    def kernel(self, params: dict) -> tuple[tuple[float, float, float, float], list[ForcingTerm]]:
+        """The integrator's constants (K, T1, T2, T3) and forcing terms for ``params``.
+
+        The integrator solves the Nomoto form. The acceleration form multiplied by a positive
+        inertia m is that form with K = m b0, T1 T2 = m, T1 + T2 = m c1 (T1 = T2 = 2 / c1:
+        m = 4 / c1^2) and T3 = b1 / b0 (first order: T = m = 1 / max(|a1|, 1e-3 1/s), K = m b), its
+        linear damping moved to the forcing as (1 - m a1) r and the effects' forcing times m."""
+        terms = [t for e in self.effects for t in e.forcing_terms(params)]
+        if self.form == "nomoto":
+            if self.order == 1:
+                return (params["K"], params["T"], 0.0, 0.0), terms
+            return (params["K"], params["T1"], params["T2"], params["T3"]), terms
+        if self.order == 1:
+            inertia = 1.0 / max(abs(params["a1"]), 1e-3)
+            constants = (inertia * params["b"], inertia, 0.0, 0.0)
+        else:
+            inertia = 4.0 / params["c1"] ** 2
+            constants = (inertia * params["b0"], 2.0 / params["c1"], 2.0 / params["c1"], params["b1"] / params["b0"])
+        scaled = [replace(t, coefficient=inertia * t.coefficient) for t in terms]
+        return constants, [ForcingTerm(1.0 - inertia * params["a1"], r_power=1), *scaled]
+
+    def fastest_time_constant(self, params: dict) -> float:
+        """The fastest time scale of the linear model (s), which sets the integration step."""
+        return fastest_time_constant(params)
 
     def effective_inputs(
         self, params: dict, time: np.ndarray, rudder: np.ndarray, speed: np.ndarray | None
@@ -201,9 +316,16 @@ class Structure:
         s = signals
         scale_k = s.base_column_scales.get("K", 1.0)
         scale_t = s.base_column_scales.get("T", 1.0)
-        if self.order == 1:
+        if self.form == "acceleration":  # the highest derivative on the left (speed scales left to the search)
+            y = s.r_dot if self.order == 1 else s.r_ddot
+            cols = {"r": s.r, "delta": s.delta} if self.order == 1 else {"r'": s.r_dot, "r": s.r, "delta": s.delta}
+            if self.order == 2:
+                cols["delta'"] = s.delta_dot
+        elif self.order == 1:
+            y = s.r
             cols = {"r'": s.r_dot * scale_t, "delta": s.delta * scale_k}
         else:
+            y = s.r
             cols = {
                 "r''": s.r_ddot * scale_t**2,
                 "r'": s.r_dot * scale_t,
@@ -214,14 +336,20 @@ class Structure:
             cols.update(effect.regressors(s))
         rows = s.rows
         X = np.column_stack([np.broadcast_to(c, s.r.shape)[rows] for c in cols.values()])
-        return Regression(X=X, y=s.r[rows], columns=list(cols), fixed=fixed, signals=s)
+        return Regression(X=X, y=y[rows], columns=list(cols), fixed=fixed, signals=s)
 
     def parameters_from_coefficients(self, w: np.ndarray, regression: Regression) -> tuple[dict, list[str]]:
         """Closed-form map from regression coefficients to physical parameters, with flags."""
         c = dict(zip(regression.columns, w))
         flags = []
         base = {"K": c["delta"]}
-        if self.order == 1:
+        if self.form == "acceleration":
+            if self.order == 1:
+                base = {"b": c["delta"], "a1": -c["r"]}
+            else:
+                base = {"b0": c["delta"], "b1": c["delta'"], "c1": -c["r'"], "a1": -c["r"]}
+            base["K"] = c["delta"]  # the effects' rudder-side terms are relative to the rudder's coefficient
+        elif self.order == 1:
             base["T"] = -c["r'"]
         else:
             total, product = -c["r'"], -c["r''"]
@@ -233,7 +361,7 @@ class Structure:
                 base["T1"] = (total + np.sqrt(disc)) / 2
                 base["T2"] = (total - np.sqrt(disc)) / 2
             base["T3"] = c["delta'"] / c["delta"] if c["delta"] != 0 else 0.0
-        params = dict(base)
+        params = {n: base[n] for n in self.base_names}
         for effect in self.effects:
             params.update(effect.from_coefficients(c, base))
         params.update(regression.fixed)
@@ -253,6 +381,65 @@ class Structure:
             lo = p.lower + (span if np.isfinite(p.lower) and p.lower > 0 else 0.0)
             out[p.name] = float(np.clip(v, lo, p.upper))
         return out
+
+
+def fastest_time_constant(params: dict) -> float:
+    """The fastest time scale (s) of a base model's parameters in either form: T, min(T1, T2), or
+    the fast pole's time of the acceleration form (1 / |a1|; 1 / max(c1, sqrt|a1|))."""
+    if "T" in params:
+        return float(params["T"])
+    if "T1" in params:
+        return float(min(params["T1"], params["T2"]))
+    if "c1" in params:
+        return float(1.0 / max(params["c1"], np.sqrt(abs(params["a1"])), 1e-3))
+    return float(1.0 / max(abs(params["a1"]), 1e-3))
+
+
+def nomoto_parameters(params: dict) -> dict:
+    """K and the time constants (1/s, s) of an acceleration-form parameter set, where they exist:
+    a positive linear damping a1 (first order: K = b / a1, T = 1 / a1), and real time constants
+    (second order: T1, T2 the roots of x^2 - (c1 / a1) x + 1 / a1, T3 = b1 / b0), with T (T1) below
+    ``NOMOTO_TIME_CONSTANT_LIMIT``; {} otherwise (a course-unstable hull has no K)."""
+    a1 = params["a1"]
+    if not a1 * NOMOTO_TIME_CONSTANT_LIMIT > 1.0:
+        return {}
+    if "b" in params:
+        return {"K": params["b"] / a1, "T": 1.0 / a1}
+    total, product = params["c1"] / a1, 1.0 / a1
+    disc = total * total - 4.0 * product
+    if disc < 0:
+        return {}
+    t1, t2 = (total + np.sqrt(disc)) / 2.0, (total - np.sqrt(disc)) / 2.0
+    if t1 > NOMOTO_TIME_CONSTANT_LIMIT:
+        return {}
+    return {"K": params["b0"] / a1, "T1": t1, "T2": t2, "T3": params["b1"] / params["b0"]}
+
+
+def nomoto_view(params: dict, covariance: np.ndarray | None, names: list, std_errors: dict) -> tuple[dict, dict]:
+    """``nomoto_parameters`` of an acceleration-form fit and their standard errors by the delta
+    method: through ``covariance`` of the parameters ``names`` where given, else as if the fitted
+    parameters' errors ``std_errors`` were independent."""
+    values = nomoto_parameters(params)
+    if not values:
+        return {}, {}
+    fitted = [n for n in names if n in ACCELERATION_NAMES]
+    gradient = np.zeros((len(values), len(fitted)))
+    for j, name in enumerate(fitted):
+        step = 1e-6 * max(abs(params[name]), 1e-9)
+        moved = nomoto_parameters(dict(params, **{name: params[name] + step}))
+        if not moved:
+            moved = nomoto_parameters(dict(params, **{name: params[name] - step}))
+            step = -step
+        gradient[:, j] = [(moved[k] - values[k]) / step for k in values]
+    if covariance is not None:
+        index = [names.index(n) for n in fitted]
+        cov = covariance[np.ix_(index, index)]
+    else:
+        cov = np.diag([std_errors.get(n, np.inf) ** 2 for n in fitted])
+    with np.errstate(invalid="ignore"):
+        variance = np.einsum("ij,jk,ik->i", gradient, cov, gradient)
+    errors = {k: float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else float("inf") for k, v in zip(values, variance)}
+    return {k: float(v) for k, v in values.items()}, errors
 
 
 def parse_effects(effects) -> tuple[str, ...]:

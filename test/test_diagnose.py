@@ -12,8 +12,8 @@ from ship_ident import cli
 from ship_ident.dataset import join_recordings
 from ship_ident.diagnose import _fit, diagnose, extrapolation, free_run
 from ship_ident.effects import EFFECTS
-from ship_ident.simulator import simulate
-from ship_ident.structure import Structure
+from ship_ident.simulator import VESSELS, simulate
+from ship_ident.structure import Structure, nomoto_parameters
 
 ROOT = Path(__file__).resolve().parents[1]
 KVLCC2 = ROOT.parent / "shared" / "data" / "kvlcc2_marin"
@@ -268,9 +268,20 @@ def test_extrapolation_names_what_the_fit_never_saw():
 
 
 R0 = 0.5883 * np.radians(20.0)  # seed001's turn rate at 20 deg of rudder (rad/s)
+
+
+def _course_unstable_seed001() -> dict:
+    """seed001's hull in the acceleration form with its linear yaw damping reversed to -0.3 times its
+    own, held by a cubic damping at 0.4 R0."""
+    stable = Structure("nomoto2", ("course_instability",)).in_form(VESSELS["seed001"].parameters)
+    return dict(
+        {k: stable[k] for k in ("b0", "b1", "c1")}, a1=-0.3 * stable["a1"], a3=0.3 * stable["a1"] / (0.4 * R0) ** 2
+    )
+
+
 NEW_EFFECTS = {
-    "course_instability": {"n1": -0.3, "n3": 0.3 / (0.4 * R0) ** 2},  # holds a turn at 0.4 R0
-    "quadratic_yaw": {"d_q": 0.8 / R0},
+    "course_instability": _course_unstable_seed001(),
+    "quadratic_yaw": {"d_q": 0.8 / R0},  # in the Nomoto form's units; simulate converts
     "rudder_stall": {"c_stall": 0.8},
 }
 
@@ -278,11 +289,11 @@ NEW_EFFECTS = {
 @pytest.mark.slow
 @pytest.mark.parametrize("effect", NEW_EFFECTS)
 def test_effects_real_hulls_need_are_named_first_with_their_parameters(effect):
-    """Course instability (n1 < 0), r|r| damping and rudder stall hidden on seed001: named first,
-    fitted within 30 % of the truth (n1 trades against K and T1), most of the held-out error
-    removed (the larger of heading and yaw rate, as the ranking)."""
-    truth = NEW_EFFECTS[effect]
-    result = diagnose(_data((effect,), truth), "nomoto2", (), workers=1)
+    """Course instability (a1 < 0), r|r| damping and rudder stall hidden on seed001: named first,
+    the effect's own parameter fitted within 30 % of the truth, most of the held-out error removed
+    (the larger of heading and yaw rate, as the ranking)."""
+    sim = simulate("random", "seed001", effects=(effect,), duration=DURATION, seed=1, parameters=NEW_EFFECTS[effect])
+    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
     top = result.candidates[0]
     print(
         effect,
@@ -290,21 +301,23 @@ def test_effects_real_hulls_need_are_named_first_with_their_parameters(effect):
         top.estimate.parameters,
     )
     assert top.effect == effect and top.improvement > 0.5
-    name = next(iter(truth))
-    assert top.estimate.parameters[name] == pytest.approx(truth[name], rel=0.3)
+    name = top.estimate.structure.effects[-1].parameters[0].name
+    assert top.estimate.parameters[name] == pytest.approx(sim.truth[name], rel=0.3)
     assert result.verdict != "adequate"
 
 
 @pytest.mark.parametrize("model", ["nomoto1", "nomoto2"])
-def test_a_stable_course_instability_fit_is_a_rescaled_nomoto_model(model):
-    """T1 T2 r'' + (T1 + T2) r' + n1 r = K (delta + T3 delta') with n1 > 0 and no cubic damping moves
-    exactly as the Nomoto model divided by n1: its base_equivalent free-runs the same yaw rate."""
+def test_the_acceleration_form_of_a_course_stable_hull_is_its_nomoto_model(model):
+    """A hull with a positive linear damping and no nonlinear one, written per unit yaw inertia
+    (b, a1 or b0, b1, c1, a1), free-runs exactly as its Nomoto model, and gives back K and the time
+    constants (``nomoto_parameters``)."""
     data = simulate("zigzag10", duration=300.0, seed=3).dataset
     base = {"K": 0.2, "T": 8.0} if model == "nomoto1" else {"K": 0.2, "T1": 8.0, "T2": 0.6, "T3": 1.2}
-    unstable = dict(base, n1=0.4, n3=0.0)
-    equivalent = EFFECTS["course_instability"].base_equivalent(unstable)
-    assert equivalent["K"] == pytest.approx(0.5)
-    with_effect = free_run(Structure(model, ("course_instability",)), unstable, data)
-    without = free_run(Structure(model, ()), {k: equivalent[k] for k in base}, data)
+    structure = Structure(model, ("course_instability",))
+    accelerated = structure.neutral_effect_start(base)
+    assert structure.form == "acceleration" and accelerated["a3"] == 0.0 and "K" not in accelerated
+    assert nomoto_parameters(accelerated) == pytest.approx(base)
+    with_effect = free_run(structure, accelerated, data)
+    without = free_run(Structure(model, ()), base, data)
     scale = np.std(with_effect.yaw_rate)
     assert scale > 0.005 and np.max(np.abs(with_effect.yaw_rate - without.yaw_rate)) < 1e-3 * scale

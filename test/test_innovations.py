@@ -10,6 +10,7 @@ from ship_ident.estimators import make_estimator
 from ship_ident.estimators.base import fit_substeps
 from ship_ident.innovations import innovation_filter, noise_model
 from ship_ident.simulator import Noise, simulate
+from ship_ident.structure import Structure
 
 NOISE = Noise()
 
@@ -29,7 +30,7 @@ def test_innovations_of_a_free_run_on_the_noisy_rudder_are_white():
     psi, r = sim.structure.simulate(truth, sim.dataset, initial=[(0.0, 0.0, 0.0)], substeps=fit_substeps(h, truth))
     errors = np.column_stack([sim.dataset.heading - psi, sim.dataset.yaw_rate - r])
     kalman = innovation_filter(
-        noise_model(2, truth, h, fit_substeps(h, truth), NOISE.rudder, NOISE.heading, NOISE.yaw_rate)
+        noise_model(Structure("nomoto2"), truth, h, fit_substeps(h, truth), NOISE.rudder, NOISE.heading, NOISE.yaw_rate)
     )
     white = kalman.whiten(errors)
     assert np.std(errors[:, 0]) > 1.3 * NOISE.heading  # the rudder-noise walk is there
@@ -94,7 +95,7 @@ def with_time_constant(parameters: dict) -> dict:
 
 def test_noise_model_without_rudder_noise_is_plain_weighting():
     sim = simulate("zigzag20", noise=0.0, duration=60.0, seed=0)
-    model = noise_model(2, sim.truth, 0.1, 2, 0.0, NOISE.heading, NOISE.yaw_rate)
+    model = noise_model(Structure("nomoto2"), sim.truth, 0.1, 2, 0.0, NOISE.heading, NOISE.yaw_rate)
     errors = np.random.default_rng(0).normal(size=(500, 2)) * [NOISE.heading, NOISE.yaw_rate]
     np.testing.assert_allclose(
         innovation_filter(model).whiten(errors), errors / [NOISE.heading, NOISE.yaw_rate], rtol=1e-6

@@ -38,7 +38,8 @@ from ..estimators.base import fit_substeps
 from ..innovations import innovation_filter, noise_model, spectral_fisher_information
 from ..structure import Structure
 
-NOISE_SHAPING = ("K", "T", "T1", "T2", "T3")  # the parameters the linearised noise model depends on
+# the parameters the linearised noise model depends on (either form)
+NOISE_SHAPING = ("K", "T", "T1", "T2", "T3", "b", "b0", "b1", "c1", "a1")
 
 
 def output_sensitivities(
@@ -73,7 +74,7 @@ def _noise_models(structure: Structure, truth: dict, dataset: Dataset, noise: tu
     substeps = fit_substeps(h, truth)
 
     def model(params):
-        return noise_model(structure.order, params, h, substeps, *noise)
+        return noise_model(structure, params, h, substeps, *noise)
 
     slopes = []
     for name in structure.free_names:
@@ -127,15 +128,35 @@ def cramer_rao_bound(
     yaw_rate_noise: float,
     rudder_noise: float = 0.0,
 ) -> dict:
-    """Lower bounds on the std (SI units) of every free parameter and of ``T1+T2-T3`` (nomoto2);
+    """Lower bounds on the std (SI units) of every free parameter and of ``T1+T2-T3`` (nomoto2 form);
     ``dataset`` carries the true rudder (the sensitivities), ``rudder_noise`` its sensor noise."""
     fisher, names = fisher_information(structure, truth, dataset, initial, heading_noise, yaw_rate_noise, rudder_noise)
     cov = np.linalg.inv(fisher)
     p = len(structure.free_names)
     bound = {name: float(np.sqrt(cov[i, i])) for i, name in enumerate(structure.free_names)}
-    if structure.order == 2:
+    if "T1" in structure.free_names:
         g = np.zeros(len(names))
         for name, sign in (("T1", 1.0), ("T2", 1.0), ("T3", -1.0)):
             g[structure.free_names.index(name)] = sign
         bound["T1+T2-T3"] = float(np.sqrt(g[:p] @ cov[:p, :p] @ g[:p]))
     return bound
+
+
+def identifiability(
+    structure: Structure, truth: dict, dataset: Dataset, heading_noise: float, yaw_rate_noise: float
+) -> tuple[float, dict]:
+    """Whether the output-error problem determines every free parameter of ``structure`` at
+    ``truth`` on the rudder of ``dataset`` (white sensor noise of std ``heading_noise`` rad and
+    ``yaw_rate_noise`` rad/s): the condition number of the parameters' Fisher information, the
+    initial states marginalised (Schur complement) and each parameter scaled by its value, and
+    each parameter's Cramer-Rao bound relative to its value. A free direction (parameters that
+    can move together without changing the motion) shows as a huge condition number."""
+    initial = [(dataset.heading[a], dataset.yaw_rate[a], 0.0) for a, _ in dataset.segments]
+    fisher, _ = fisher_information(structure, truth, dataset, initial, heading_noise, yaw_rate_noise)
+    p = len(structure.free_names)
+    states = fisher[p:, p:]
+    marginal = fisher[:p, :p] - fisher[:p, p:] @ np.linalg.pinv(states) @ fisher[p:, :p]  # nomoto1 has no r' state
+    scale = np.array([abs(truth[n]) for n in structure.free_names])
+    scaled = marginal * np.outer(scale, scale)
+    relative = np.sqrt(np.clip(np.diag(np.linalg.pinv(scaled)), 0.0, None))
+    return float(np.linalg.cond(scaled)), {n: float(r) for n, r in zip(structure.free_names, relative)}

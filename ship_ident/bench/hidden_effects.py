@@ -82,9 +82,16 @@ def strength(effect: str, vessel, rng: np.random.Generator, answer: Response) ->
         return {"r_bias": sign * rng.uniform(2.5, 5.0) * Noise().yaw_rate}
     if effect == "speed_dependence":
         return {"n_K": 1.0, "n_T": 1.0}
-    if effect == "course_instability":
-        n1 = -rng.uniform(0.2, 0.5)
-        return {"n1": n1, "n3": -n1 / (rng.uniform(0.3, 0.5) * r0) ** 2}
+    if effect == "course_instability":  # the linear damping reversed to 20-50 % of the vessel's, held by a cubic one
+        ratio = -rng.uniform(0.2, 0.5)
+        inertia = p["T1"] * p["T2"]
+        return {
+            "b0": p["K"] / inertia,
+            "b1": p["K"] * p["T3"] / inertia,
+            "c1": (p["T1"] + p["T2"]) / inertia,
+            "a1": ratio / inertia,
+            "a3": -ratio / (rng.uniform(0.3, 0.5) * r0) ** 2 / inertia,
+        }
     if effect == "quadratic_yaw":
         return {"d_q": rng.uniform(0.5, 1.0) / r0}
     if effect == "rudder_stall":  # the moment 20-35 % short at the rudder used, within the bound 0.9 1/rad^2

@@ -96,6 +96,9 @@ def format_diagnosis(result, source, options: str = "") -> str:
             f"{b['rmse_heading'] * DEG:.3g} -> {fit['rmse_heading'] * DEG:.3g} deg, yaw rate RMSE "
             f"{b['rmse_yaw_rate'] * DEG:.3g} -> {fit['rmse_yaw_rate'] * DEG:.3g} deg/s"
         )
+    stability = result.estimate.course_stability()
+    if stability:
+        lines.append(f"  {stability['sentence']}")
     lines.append("worst segments (short free runs from the measured state):")
     for seg in result.worst_segments:
         c = seg["conditions"]

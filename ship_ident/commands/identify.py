@@ -75,16 +75,24 @@ def format_estimate(estimate, source) -> str:
         f"({estimate.samples} samples, {estimate.window[1] - estimate.window[0]:.1f} s)",
         f"  {'parameter':<10} {'value':>12} {'std error':>12}  unit",
     ]
-    for name in estimate.structure.parameter_names:
-        unit, scale = display_unit(estimate.structure.parameter(name))
+    values, errors = estimate.published()
+    for name in values:
+        known = name in estimate.structure.parameter_names
+        unit, scale = display_unit(estimate.structure.parameter(name)) if known else (NOMOTO_UNITS[name], 1.0)
         lines.append(
-            f"  {name:<10} {estimate.parameters[name] * scale:>12.5g} "
-            f"{estimate.std_errors[name] * scale:>12.3g}  {unit}"
+            f"  {name:<10} {values[name] * scale:>12.5g} {errors[name] * scale:>12.3g}  {unit}"
+            + ("" if known else "  (from the fitted ones)")
         )
+    stability = estimate.course_stability()
+    if stability:
+        lines.append(stability["sentence"])
     lines.append(format_fit(estimate.fit))
     if estimate.flags:
         lines.append(f"flags: {', '.join(estimate.flags)}")
     return "\n".join(lines)
+
+
+NOMOTO_UNITS = {"K": "1/s", "T": "s", "T1": "s", "T2": "s", "T3": "s"}
 
 
 def display_unit(parameter) -> tuple[str, float]:

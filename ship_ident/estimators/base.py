@@ -16,6 +16,7 @@ data for the fit figures.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,13 +25,16 @@ from ..dataset import DataError, Dataset
 from ..integrate import substeps_for
 from ..metrics import effective_sample_fraction, free_run_fit
 from ..signals import Signals, compute_signals
-from ..structure import Regression, Structure
+from ..structure import Regression, Structure, fastest_time_constant, nomoto_view
 
+Z_95 = 1.96  # two-sided 95 % point of the normal distribution
 MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite the hull
 MIN_YAW_RATE_STD = np.radians(0.02)  # rad/s: an absolute floor under the noise-relative need
 HARDLY_MOVES_SNR = 2.0  # yaw-rate std below this many noise levels: it hardly moves
 # Relative standard errors (std / |value|) above which a window does not determine a parameter.
-MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3}
+# The acceleration form's gain b (b0) and damping c1 likewise; its linear damping a1 may be near zero
+# (a marginally stable hull), where no relative error is small: the window is judged by the others.
+MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3, "b": 0.1, "b0": 0.1, "c1": 0.3}
 
 
 @dataclass
@@ -76,17 +80,54 @@ class Estimate:
     info: dict = field(default_factory=dict)
     window: tuple = (0.0, 0.0)
     influence: Influence | None = field(default=None, repr=False, compare=False)  # a search's, not a regression's
+    covariance: np.ndarray | None = field(default=None, repr=False, compare=False)  # of the free parameters
 
     @property
     def ok(self) -> bool:
         return not any(f in self.flags for f in ("low_excitation", "diverged", "failed"))
 
+    def published(self) -> tuple[dict, dict]:
+        """The parameters and standard errors a user reads: the fitted ones and, for a fit in the
+        acceleration form, K and the time constants where the hull has them (positive linear
+        damping), by the delta method through the fit's covariance."""
+        values, errors = dict(self.parameters), dict(self.std_errors)
+        if self.structure.form == "acceleration":
+            nomoto, nomoto_errors = nomoto_view(
+                self.parameters, self.covariance, self.structure.free_names, self.std_errors
+            )
+            values.update(nomoto)
+            errors.update(nomoto_errors)
+        return values, errors
+
+    def course_stability(self) -> dict | None:
+        """Whether the hull holds a straight course by itself, for a fit in the acceleration form
+        (None otherwise: the Nomoto form's K, T > 0 is course-stable by construction): its linear
+        yaw damping a1 (negative: course-unstable, Norrbin), how many standard errors it lies from
+        zero, and a sentence. Within ``Z_95`` standard errors of zero the data do not decide."""
+        if self.structure.form != "acceleration" or "a1" not in self.structure.free_names:
+            return None
+        a1, error = self.parameters["a1"], self.std_errors.get("a1", math.inf)
+        z = a1 / error if error > 0 else math.copysign(math.inf, a1)
+        unit = self.structure.parameter("a1").unit
+        figures = f"linear yaw damping a1 = {a1:.3g} +- {error:.2g} {unit}, {abs(z):.1f} standard errors from zero"
+        if abs(z) >= Z_95:
+            verdict = "unstable" if a1 < 0 else "stable"
+            sentence = f"course-{verdict}: {figures}"
+        else:
+            verdict = "undetermined"
+            lean = "unstable" if a1 < 0 else "stable"
+            sentence = f"course stability not determined by these data ({figures}; it leans {lean})"
+        return {"verdict": verdict, "linear_damping": a1, "std_error": error, "z": z, "sentence": sentence}
+
     def to_json(self) -> dict:
+        values, errors = self.published()
+        stability = self.course_stability()
         return {
             "structure": self.structure.to_json(),
             "method": self.method,
-            "parameters": {k: float(v) for k, v in self.parameters.items()},
-            "std_errors": {k: float(v) for k, v in self.std_errors.items()},
+            "parameters": {k: float(v) for k, v in values.items()},
+            "std_errors": {k: float(v) for k, v in errors.items()},
+            **({"course_stability": stability} if stability else {}),
             "fit": self.fit,
             "samples": int(self.samples),
             "window": {"start": float(self.window[0]), "end": float(self.window[1])},
@@ -164,7 +205,7 @@ def excitation_flags(dataset: Dataset, parameters: dict | None = None, std_error
 def fit_substeps(h: float, params: dict) -> int:
     """RK4 substeps per sample for fitting and fit figures: step at most 2/3 of the fastest
     time constant (free-run error ~1e-5 deg on seed 001's vessel, far below sensor noise)."""
-    return substeps_for(h, min(params[n] for n in ("T", "T1", "T2") if n in params), 1.5)
+    return substeps_for(h, fastest_time_constant(params), 1.5)
 
 
 def finish_estimate(

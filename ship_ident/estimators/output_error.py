@@ -59,7 +59,7 @@ from scipy import sparse
 
 from ..dataset import Dataset, cut_segments
 from ..noise import robust_std
-from ..structure import Structure
+from ..structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
 
 MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
@@ -189,7 +189,7 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     try:
         bread = scaled_inverse(_dense(J.T @ J))[:p]
     except np.linalg.LinAlgError:
-        return np.full(p, np.inf), np.full(p, np.inf), np.full((n_samples, p), 1.0 / n_samples)
+        return np.full(p, np.inf), np.full(p, np.inf), np.full((n_samples, p), 1.0 / n_samples), None
     projected = np.asarray(J @ bread.T)
     squares = projected[:n_samples] ** 2 + projected[n_samples:] ** 2
     shares = squares / np.maximum(squares.sum(axis=0), 1e-300)
@@ -197,7 +197,7 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     lags = np.arange(-min(bandwidth, n_samples - 1), min(bandwidth, n_samples - 1) + 1)
     bartlett = 1.0 - np.abs(lags) / (bandwidth + 1.0)
     meat = u.T @ convolve(u, bartlett[:, None], mode="same")
-    return np.sqrt(np.clip(np.diag(meat), 0, None)), np.sqrt(np.clip(np.diag(bread[:, :p]), 0, None)), shares
+    return np.sqrt(np.clip(np.diag(meat), 0, None)), np.sqrt(np.clip(np.diag(bread[:, :p]), 0, None)), shares, meat
 
 
 HUBER_THRESHOLD = 5.0  # robust standard deviations beyond which a residual counts linearly
@@ -317,7 +317,7 @@ class OutputError(Estimator):
         that basin)."""
         conservative = x0.copy()
         for i, name in enumerate(names):
-            if name in ("K", "T", "T1"):
+            if name in ("K", "T", "T1") or name in ACCELERATION_NAMES:
                 continue
             if name == "T2":
                 conservative[i] = min(params0["T2"], 0.1 * params0["T1"])
@@ -571,7 +571,7 @@ class OutputError(Estimator):
             )
             iterations += valley_iterations + result.iterations
         params, _ = unpack(result.x)
-        std, gauss_newton, shares = parameter_std_errors(
+        std, gauss_newton, shares, covariance = parameter_std_errors(
             result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(intervals)
         )
         std_errors = {n: float(s) for n, s in zip(names, std)}
@@ -621,4 +621,4 @@ class OutputError(Estimator):
             "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
         }
         estimate = finish_estimate(structure, dataset, self.name, params, std_errors, flags, info)
-        return replace(estimate, influence=Influence(dataset.time, cumulative))
+        return replace(estimate, influence=Influence(dataset.time, cumulative), covariance=covariance)

@@ -57,9 +57,7 @@ class PredictionError(OutputError):
 
         h = dataset.sample_time
         s_delta = dataset.noise_std("rudder", np.radians(0.001))
-        kalman = innovation_filter(
-            noise_model(structure.order, params0, h, fit_substeps(h, params0), s_delta, s_psi, s_r)
-        )
+        kalman = innovation_filter(noise_model(structure, params0, h, fit_substeps(h, params0), s_delta, s_psi, s_r))
 
         def weigh(psi_err, r_err):
             errors = np.column_stack([psi_err, r_err])

@@ -461,12 +461,9 @@ class OnlineIdentifier:
                 f"{len(dataset.gaps)} gap(s) in the window, longest {longest:.1f} s; fitting the segments apart"
             )
         record.conditions.update(rudder_saturation(dataset.rudder, config.rudder_limit))
-        rudder_std = float(np.std(dataset.rudder))
-        if rudder_std < config.min_rudder_std:
-            record.conditions["too_little_excitation"] = (
-                f"rudder std {math.degrees(rudder_std):.2f} deg < "
-                f"{math.degrees(config.min_rudder_std):.2f} deg; keeping the last good estimate"
-            )
+        shortfall = excitation_shortfall(dataset, min_rudder_std=config.min_rudder_std)
+        if shortfall:
+            record.conditions["too_little_excitation"] = f"{shortfall}; {KEEPING}"
             return
         estimator = make_estimator(config.method)
         try:
@@ -482,19 +479,20 @@ class OnlineIdentifier:
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record.conditions["refit_failed"] = f"{type(exc).__name__}: {exc}"
             return
+        # the estimator judged the floors with the default rudder floor; the window passed the node's above
+        estimate = replace(estimate, flags=[f for f in estimate.flags if f != "low_excitation"])
         if not estimate.ok:
-            if "low_excitation" in estimate.flags:
-                record.conditions["too_little_excitation"] = (
-                    f"{excitation_shortfall(dataset)}; keeping the last good estimate"
-                )
-            else:
-                record.conditions["refit_failed"] = (
-                    f"estimate rejected ({', '.join(estimate.flags)}); keeping the last good estimate"
-                )
+            record.conditions["refit_failed"] = (
+                f"estimate rejected ({', '.join(estimate.flags)}); keeping the last good estimate"
+            )
             return
         # on the fold T1 = T2 the time constants' errors are infinite by the search's end, not the data's
         folded = "repeated_time_constants" in estimate.flags
-        undetermined = None if folded else excitation_shortfall(dataset, estimate.parameters, estimate.std_errors)
+        undetermined = (
+            None
+            if folded
+            else excitation_shortfall(dataset, estimate.parameters, estimate.std_errors, config.min_rudder_std)
+        )
         if undetermined:
             record.conditions["too_little_excitation"] = f"{undetermined}; {KEEPING}"
             return

@@ -60,15 +60,10 @@ SHORT_RATIO_FACTOR = 4.0  # the newest refit period's error must exceed this man
 MIN_SHORT_SAMPLES = 20  # the short test's newest samples: at least this many (a median of 20)
 MEDIAN_OF_CHI2_1 = 0.4549  # median of e^2 / sigma^2 for Gaussian e
 MIN_LEVEL = SENSOR_RESOLUTION**2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
-# A reference model must be well determined: relative standard errors at most these (a window of
-# steady turning gives a K to 10-25 % and T1 to 60-400 %, and any new rudder motion surprises it).
-# Its gain as well as one published as OK (within 3 %): a K within 5 % let in a model whose cubic
-# damping was far off (bench vessels seed 1747880341 at 245 s: K 4.6 +- 4.1 %, alpha 15.7 for -0.9),
-# which mispredicted the next turns of the same hull (a false change), and models of windows
-# straddling a change, bent towards the new hull (seed 4110273366: K +- 4.8 %, alpha -38 for 26.7),
-# which then held the gain followed on the new data 20 % low. T1 may be looser than an OK estimate's
-# (within 20 %): the full windows of a USV in steady turns determine K (+- 0.2 %) and T1 only to
-# 8-20 %, and such a reference finds a change 8 s after it (seed 1747880361; 180 s without it).
+# A reference model must be well determined, its gain as well as an OK estimate's: a loosely known K
+# travels with a cubic damping far off, which mispredicts the next turns of the same hull (a false
+# change), or with a window straddling a change, bent towards the new hull. T1 may be looser: steady
+# turns determine K to 0.2 % but T1 only to 8-20 %, and such a reference still finds a change.
 REFERENCE_RELATIVE_ERRORS = {"K": 0.03, "T": 0.2, "T1": 0.2}
 # The gain test: a newest block mispredicted by more than GAIN_TEST_RATIO (below ``ratio``) also votes
 # for a change when K refitted on it moves by more than GAIN_TEST_SHIFT and GAIN_TEST_STANDARD_ERRORS
@@ -110,9 +105,9 @@ def block_squared_errors(structure: Structure, params: dict, dataset: Dataset, b
     block (or from its segment's start). A run started at a block from the measured yaw rate with no
     yaw acceleration carries, just after a rudder step, an initial transient of about K delta T3 / T1
     (1-2 deg/s on a quick USV, 10-20 times its yaw-rate noise, dying out over T1), which a run
-    started one test length earlier has shed by the block (bench vessels seed 568021594: a USV
-    with T1 11.6 s on rudder steps, right model, blocks restarted at their start 5-84 times its
-    usual error; a false change). Runs that do not overlap share one simulation."""
+    started one test length earlier has shed by the block; blocks restarted at their start put a
+    right model at many times its usual error (a false change). Runs that do not overlap share one
+    simulation."""
     runs = [(max(a - lead, max(s for s, e in dataset.segments if s <= a < e)), b) for a, b in blocks]
     families, ends = [], []  # runs of one simulation each, in time order, none overlapping
     for i in sorted(range(len(runs)), key=lambda i: runs[i]):
@@ -380,12 +375,10 @@ def locate_change(structure: Structure, params: dict, dataset: Dataset, split: i
     to it, the latest whose summed squared errors (yaw rate and heading over their noise; the same
     data for every candidate) are within LOCATION_TOLERANCE of the smallest. The side before is
     refitted too: over a 30 s block of a steady turn a K 0.3 % off drifts the heading by several
-    times its noise, and with the reference held there its own small bias moved the change 29 s
-    early, where a K refitted after it absorbed that bias (bench vessels seed 3441109605). The
-    error steps up only when the rudder moves, but a changed hull
-    coasting with the rudder amidships already shows its new time constant in the decay of its yaw
-    rate and in its heading (bench peers --quick, random: the error steps up at 247.8 s, the change
-    was at 240 s; K refitted from 247.8 s was 6 % off at 250.5 s, from 240.3 s 2 % at 249.5 s)."""
+    times its noise, and with the reference held there its own small bias would pull the change
+    early, where a K refitted after it absorbs that bias. The error steps up only when the rudder
+    moves, but a changed hull coasting with the rudder amidships already shows its new time constant
+    in the decay of its yaw rate and in its heading, so the location reaches back before the step."""
     start, stop = dataset.segments[-1]
     first = max(start, split - n)
     origin = max(start, first - n)  # the side before the candidate starts here
@@ -398,7 +391,7 @@ def locate_change(structure: Structure, params: dict, dataset: Dataset, split: i
     def fitted_cost(blocks: tuple, names: tuple) -> float:
         # K alone is a point of the model with K and T1 (T1 held at the reference's): where the
         # search over both diverges (a steady turn: T1 to its bound, runs that blow up), it is the
-        # better fit of that model (bench vessels seed 1764177395: the change placed 26 s early)
+        # better fit of that model, and without it the change is placed early
         costs = [fit_gain_and_cost(structure, params, dataset, blocks, n)[2] for n in dict.fromkeys((names, ("K",)))]
         return min((c for c in costs if math.isfinite(c)), default=math.inf)  # a run that diverged explains nothing
 

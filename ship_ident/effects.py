@@ -12,7 +12,7 @@ parameters (SI units), and hooks that say how it acts
   carries the effect's signature, and a sentence saying so.
 
 Every hook has a neutral default, so a new effect writes only what it
-changes. Register it with ``register_effect`` (see README, "Adding an effect").
+changes. Register it with ``register_effect`` (see docs/diagnose.md, "Adding an effect").
 """
 
 from __future__ import annotations

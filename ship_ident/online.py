@@ -114,36 +114,23 @@ MIN_FRESH_SHARE = 1e-3  # two estimates' difference has at least this share of t
 # and the grid's floor loses one more (with 1.5 a ship's window, sample time 0.37 s, never was).
 FULL_WINDOW_MARGIN = 3.0
 
-# Relative standard errors (published, std / |value|) within which a new estimate is trusted (status
-# OK): a 10 % error is then 3 (K) or 2.5 (T1) standard errors away (at 5 %, 2 of them: bench vessels
-# seed 3989590108, a ship whose windows bound T1 at 4.5-4.7 %, published T1 12-14 % off as OK at
-# 4.8-4.9 %). A looser one (within the MAX_RELATIVE_ERRORS of estimators.base, 10 % and 30 %) is
-# published as uncertain_estimate (WARN): its parameters with their wide errors, not as an estimate
-# to steer by (a hull whose rudder lead T3 nearly cancels T1 determines K but hardly T1); after a
-# change, one whose K is known worse than the last good estimate's is not published (a K refitted on
-# the first seconds of new data beats a full fit of a straight leg).
-# In the acceleration form (a hull whose linear yaw damping is weak or negative) the rudder's yaw
-# acceleration b (b0) stands for K and the dampings for the time constants.
+# Relative standard errors (published, std / |value|) within which a new estimate is trusted (OK): a
+# 10 % error is then 3 (K) or 2.5 (T1) standard errors away; a looser one within MAX_RELATIVE_ERRORS is
+# published as uncertain_estimate (WARN), and after a change not at all if its K is known worse than
+# the last good estimate's. In the acceleration form (a hull whose linear yaw damping is weak or
+# negative) the rudder's yaw acceleration b (b0) stands for K and the dampings for the time constants.
 TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04, "b": 0.03, "b0": 0.03, "c1": 0.04, "a1": 0.1}
-# A second pole T2 that the window cannot tell from zero leaves the response nearly first order: T1 may
-# slide along the T2 = T3 valley (``first_order_valley``). The cost's profile along it is taken with T2
-# held at its floor and at these shares of T1 above the estimate (the truth may lie far beyond T2's own
-# 95 % end: bench vessels seed 777000009's start-up windows, T2 0.03 +- 0.18 s for a true 1.27 s)
+# Shares of T1 above the estimate at which T2 is held to profile the cost along the T2 = T3 valley
+# (``first_order_valley``): a second pole the window cannot tell from zero may lie far beyond its 95 % end.
 VALLEY_RUNGS = (0.1, 0.2, 0.35, 0.5)
 PROFILE_CLIMB_CHI2 = 16.0  # a point this far up a profile (4 standard errors) ends its climb
-# An estimate that would be trusted with K's or T1's error past this share of its trusted limit is
-# first checked along the profile over the cubic damping alpha, at these of alpha's standard errors
-# either side (``cubic_damping_slides``); one whose errors are well within needs no check. Until a
-# full window has been fitted, a shorter window's is checked from a smaller share: it holds fewer
-# turn rates, so the trade of a larger gain for a larger damping bends further within alpha's error,
-# and no run of successive estimates shows it yet (bench vessels seed 3309800875, a USV in steady
-# turns at 2.6x the noise: its 110 s window gave T1 12 % off at +- 2.6 %, alpha -9.7 +- 2.2 for a
-# true -1.0, and T1 slides 4.8 % along alpha; seed 619072884's 65 s window, T1 12 % off at
-# +- 3.4 %, WARN after the check). Trusting start-up windows within half the errors instead refused
-# nearly half the well-excited ones (123 of 281 over 23 start-ups).
+# Share of the trusted limit on K's or T1's error past which an estimate is first checked along the
+# profile over the cubic damping alpha (``cubic_damping_slides``): gain and damping trade within alpha's error.
 ALPHA_CHECK_SHARE = 0.75
+# The same before a full window has been fitted: a short window holds fewer turn rates, so the trade
+# bends further, and no run of successive estimates shows it yet.
 START_UP_ALPHA_CHECK_SHARE = 0.5
-ALPHA_RUNGS = (2.0, 4.0)
+ALPHA_RUNGS = (2.0, 4.0)  # the profile's points, in alpha's standard errors either side of the estimate
 # Regressions cannot hold a parameter: below this share of T1, an undetermined T2 gives T1 the joint
 # error of T1, T2 and T3 instead
 FIRST_ORDER_SHARE = 0.1
@@ -463,12 +450,9 @@ class OnlineIdentifier:
                 f"{len(dataset.gaps)} gap(s) in the window, longest {longest:.1f} s; fitting the segments apart"
             )
         record.conditions.update(rudder_saturation(dataset.rudder, config.rudder_limit))
-        rudder_std = float(np.std(dataset.rudder))
-        if rudder_std < config.min_rudder_std:
-            record.conditions["too_little_excitation"] = (
-                f"rudder std {math.degrees(rudder_std):.2f} deg < "
-                f"{math.degrees(config.min_rudder_std):.2f} deg; keeping the last good estimate"
-            )
+        shortfall = excitation_shortfall(dataset, min_rudder_std=config.min_rudder_std)
+        if shortfall:
+            record.conditions["too_little_excitation"] = f"{shortfall}; {KEEPING}"
             return
         estimator = make_estimator(config.method)
         try:
@@ -484,19 +468,20 @@ class OnlineIdentifier:
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record.conditions["refit_failed"] = f"{type(exc).__name__}: {exc}"
             return
+        # the estimator judged the floors with the default rudder floor; the window passed the node's above
+        estimate = replace(estimate, flags=[f for f in estimate.flags if f != "low_excitation"])
         if not estimate.ok:
-            if "low_excitation" in estimate.flags:
-                record.conditions["too_little_excitation"] = (
-                    f"{excitation_shortfall(dataset)}; keeping the last good estimate"
-                )
-            else:
-                record.conditions["refit_failed"] = (
-                    f"estimate rejected ({', '.join(estimate.flags)}); keeping the last good estimate"
-                )
+            record.conditions["refit_failed"] = (
+                f"estimate rejected ({', '.join(estimate.flags)}); keeping the last good estimate"
+            )
             return
         # on the fold T1 = T2 the time constants' errors are infinite by the search's end, not the data's
         folded = "repeated_time_constants" in estimate.flags
-        undetermined = None if folded else excitation_shortfall(dataset, estimate.parameters, estimate.std_errors)
+        undetermined = (
+            None
+            if folded
+            else excitation_shortfall(dataset, estimate.parameters, estimate.std_errors, config.min_rudder_std)
+        )
         if undetermined:
             record.conditions["too_little_excitation"] = f"{undetermined}; {KEEPING}"
             return
@@ -518,9 +503,8 @@ class OnlineIdentifier:
         full = dataset.duration >= config.window_length - FULL_WINDOW_MARGIN * config.sample_time
         start_up = not (full or self._full_window_fitted)  # a short window, no history of estimates
         # its own errors, T1's with its slide along the T2 = T3 valley: so it enters the scatter of the
-        # next estimates (a start-up fit at the valley's foot, T1 12 % off with a slide of 13 %, made
-        # the right ones after it look scattered by 3 of their errors: bench vessels seed 799606246);
-        # whether T2 is told from zero is judged on the window's own T2 error, not the scatter's
+        # next estimates (a fit at the valley's foot with a small error makes the right estimates after
+        # it look scattered); whether T2 is told from zero is judged on the window's own T2 error
         estimate = replace(
             estimate, std_errors=first_order_valley(estimate, estimate.std_errors, estimator, structure, dataset)
         )
@@ -817,8 +801,8 @@ class EstimateScatter:
     differ by a variance U = Va (1 - i_a) + Vb (1 - i_b) + (sqrt(Va i_a) - sqrt(Vb i_b))^2 (each
     learns the shared data with its own weight); the shares come from where each fit learnt its
     parameters (``Influence``; the time shares for an estimator without one): windows sliding off
-    the steps that taught them T1 onto a straight leg differ far more than their time shares say
-    (bench vessels seed 799606292). The recent estimates (SCATTER_PAIRS of them) scatter further
+    the steps that taught them T1 onto a straight leg differ far more than their time shares say.
+    The recent estimates (SCATTER_PAIRS of them) scatter further
     when the model misses the vessel (an error that drifts with the data: differences grow as
     phi^2 U) or when each fit lands somewhere else in a flat valley of its cost (an error of its
     own, sigma, whatever the shares: 2 sigma^2). Over every pair of recent estimates, d^2 / U =
@@ -880,9 +864,8 @@ def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset
     tell the second pole T2 from zero (its 95 % interval reaches it): the response it sees is nearly
     first order, and T1 may move with T2 and T3 further than the error at the search's end says.
     The slide is read off the cost's profile over T2 (``valley_slide``). With T2 undetermined the
-    local errors describe no distribution: T2's 95 % end was a single held point that missed truths
-    far beyond it (bench vessels seed 128754784, a USV with T1 1.15 s, T2 0.27 s: T1 17 % off
-    published OK at +- 3.7 %, T2 0.03 +- 0.07 s). An estimator that cannot hold a parameter (a
+    local errors describe no distribution: a single held point at T2's 95 % end misses truths far
+    beyond it, so the profile climbs through several. An estimator that cannot hold a parameter (a
     regression without output error) gives T1 the joint error sqrt(s_T1^2 + s_T2^2 + s_T3^2) when T2
     is below FIRST_ORDER_SHARE of T1. A rudder lead T3 that cannot be told from zero alone is a hull
     without one (seed 001's: T1 stays determined)."""
@@ -903,7 +886,8 @@ def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset
 def valley_slide(estimate, estimator, structure, dataset) -> float:
     """T1's standard error (s) along the T2 = T3 valley, from the profile of the cost over T2
     (``profile_slides``) with T2 held at its floor and at VALLEY_RUNGS of T1 above the estimate, T3
-    moved with it (T1 + T2 - T3 kept as a start). Seed 128754784 at 485 s: T1 +- 4 % -> 12 %."""
+    moved with it (T1 + T2 - T3 kept as a start). On a quick USV whose T2 its window cannot resolve
+    the slide can be three times the error at the search's end."""
     parameters = estimate.parameters
     t1, t2, t3 = abs(parameters["T1"]), abs(parameters["T2"]), parameters["T3"]
     floor = structure.parameter("T2").lower
@@ -955,10 +939,8 @@ def cubic_damping_slides(estimate, std_errors: dict, estimator, structure, datas
     """Standard errors with K's and T1's (T's) at least their slides along the cubic yaw damping
     alpha (``profile_slides`` with alpha held 2 and 4 of its standard errors either side, within
     its bounds): a larger damping that the turns seen hardly feel is traded for a larger gain and a
-    slower hull, and the cost can be flat that way far beyond alpha's own error (bench vessels seed
-    3133699670, a ship with T1 75 s on a 20/20 zigzag: alpha 147 +- 42 for a true 26.5, the cost
-    unchanged at alpha 231 with K and T1 4 % and 7 % further; T1 11 % off was published OK at
-    +- 3.4 %)."""
+    slower hull, and the cost can be flat that way far beyond alpha's own error (a slow ship on a
+    zigzag turns at few rates, so its data hardly tell the cubic term from the gain)."""
     if structure.form != "nomoto" or "alpha" not in estimate.parameters or not std_errors.get("alpha", 0.0) > 0:
         return std_errors
     main = "T1" if "T1" in estimate.parameters else "T"

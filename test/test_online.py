@@ -627,6 +627,23 @@ def test_windows_sliding_off_the_steps_that_taught_them_keep_their_own_errors():
         assert abs(r.estimate["parameters"]["T1"] / sim.truth["T1"] - 1) < 0.05
 
 
+def test_min_rudder_std_below_the_default_floor_is_honoured():
+    """Random rudder steps of at most 1.2 deg on seed 001's vessel, the refit at 60 s on a 60 s
+    window whose rudder std is 0.68 deg: with ``min_rudder_std`` 0.5 deg it gives an estimate, K
+    within 5 % of the truth; with the default 1 deg it is refused, the sentence naming the floor."""
+    sim = simulate("random", duration=60.0, seed=1, amplitude=np.radians(1.2))
+    window = dict(window_length=60.0, min_window_length=30.0)
+
+    def refit_at_60_s(config):
+        return next(r for r in run_schedule(OnlineIdentifier(config), stream(sim.dataset)) if r.time == 60.0)
+
+    lowered = refit_at_60_s(OnlineConfig(min_rudder_std=np.radians(0.5), **window))
+    assert lowered.new_estimate and "too_little_excitation" not in lowered.conditions
+    assert abs(lowered.estimate["parameters"]["K"] / sim.truth["K"] - 1) < 0.05
+    refused = refit_at_60_s(OnlineConfig(**window)).conditions["too_little_excitation"]
+    assert "(the rudder hardly moves): rudder std 0.68 deg (need 1.00)" in refused
+
+
 @pytest.mark.slow
 def test_a_well_determined_window_is_used_whatever_its_yaw_rate_spread():
     """Random rudder steps of at most 3 deg: a yaw-rate spread of 3-4 noise levels (the old rule

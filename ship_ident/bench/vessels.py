@@ -77,13 +77,11 @@ WELL_EXCITED = {q: 0.5 * TRUSTED_RELATIVE_ERRORS[q] for q in ("K", "T1")}
 OFF_TOLERANCE = 0.10  # a published OK estimate this far off the truth is wrong
 # The bound is local: a hull whose fast pole and rudder lead nearly cancel (T2 close to T3) answers
 # like a first-order one, and the lead can cancel the slow pole instead (T3 close to T1) at the same
-# cost, so T1 is not determined however small its bound (bench vessels seed 1764177411 at 120 s:
-# T1's bound 0.6 %, T1 held 10 % either side of the truth raises the cost by chi2 0.1). A steady
-# case's window is well excited only when, besides its bound, T1 held OFF_TOLERANCE either side of
-# the truth lies outside the 95 % region of the cost's profile (a rise of chi2 3.84): a window that
-# cannot tell T1 from a value that far off does not determine it. (A rise of 25, what a quadratic
-# profile with T1's error at WELL_EXCITED['T1'] gives, excluded every rejected refit of draw
-# 1764177379 and 31 % of its windows: it judges the estimator's own cost, not the data.)
+# cost, so T1 is not determined however small its bound. A steady case's window is well excited only
+# when, besides its bound, T1 held OFF_TOLERANCE either side of the truth lies outside the 95 % region
+# of the cost's profile (a rise of chi2 3.84): a window that cannot tell T1 from a value that far off
+# does not determine it. (A rise of 25, what a quadratic profile with T1's error at
+# WELL_EXCITED['T1'] gives, would judge the estimator's own cost, not the data.)
 WELL_EXCITED_PROFILE_RISE = 3.84
 QUICK_HULL_T1 = 12.0  # s: the recovery target (60 s median) is set for hulls up to this T1
 MAX_SCALE = 10.0  # a ship's window is at most 10 node windows (1800 s)

@@ -152,22 +152,27 @@ def excitation(dataset: Dataset) -> dict:
 
 
 def excitation_shortfall(
-    dataset: Dataset, parameters: dict | None = None, std_errors: dict | None = None
+    dataset: Dataset,
+    parameters: dict | None = None,
+    std_errors: dict | None = None,
+    min_rudder_std: float = MIN_RUDDER_STD,
 ) -> str | None:
     """Why the data cannot support an estimate (a sentence with the figures), or None.
 
-    Without an estimate only the floors apply: a rudder that hardly moves, a boat that hardly turns
-    (yaw-rate and heading spreads both mostly noise; a slow ship's yaw rate may be buried in its
-    noise while its heading, the integral, still determines the model). With an estimate's
-    parameters and standard errors, the data are judged by what they determine: the gain and the
-    main time constant within MAX_RELATIVE_ERRORS of their values, whatever the yaw-rate spread."""
+    Without an estimate only the floors apply: a rudder that hardly moves (its std below
+    ``min_rudder_std``, rad: the node's ``min_rudder_std``, by default ``MIN_RUDDER_STD``), a boat
+    that hardly turns (yaw-rate and heading spreads both mostly noise; a slow ship's yaw rate may be
+    buried in its noise while its heading, the integral, still determines the model). With an
+    estimate's parameters and standard errors, the data are judged by what they determine: the gain
+    and the main time constant within MAX_RELATIVE_ERRORS of their values, whatever the yaw-rate
+    spread."""
     ex = excitation(dataset)
     still = ex["yaw_rate_std"] < ex["yaw_rate_std_needed"] and ex["heading_std"] < ex["heading_std_needed"]
-    if ex["rudder_std"] < MIN_RUDDER_STD or still:
-        moves = "the rudder hardly moves" if ex["rudder_std"] < MIN_RUDDER_STD else "the boat hardly turns"
+    if ex["rudder_std"] < min_rudder_std or still:
+        moves = "the rudder hardly moves" if ex["rudder_std"] < min_rudder_std else "the boat hardly turns"
         return (
             f"too little excitation ({moves}): rudder std {np.degrees(ex['rudder_std']):.2f} deg "
-            f"(need {np.degrees(MIN_RUDDER_STD):.1f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
+            f"(need {np.degrees(min_rudder_std):.2f}), yaw-rate std {np.degrees(ex['yaw_rate_std']):.3f} "
             f"deg/s and heading std {np.degrees(ex['heading_std']):.2f} deg (need "
             f"{np.degrees(ex['yaw_rate_std_needed']):.3f} or {np.degrees(ex['heading_std_needed']):.2f}, "
             "twice their noise)"

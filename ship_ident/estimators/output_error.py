@@ -474,8 +474,7 @@ class OutputError(Estimator):
             weighings = [self.residual_weighting(structure, dataset, weighted_at, s_psi, s_r, intervals)] * len(points)
         linear = [names.index(n) for n in LINEAR_NAMES if n in names] + list(range(p, p + states0.size))
         # the first step holds the rudder offset: at a gain far off its column (the gain times the
-        # offset) is tiny and the step sends the offset to its bound (bench vessels seed 315185517, a
-        # ship with T1 64 s: K 0.007 -> 0.14 with delta_r -> -0.35 rad, rejected, every slow start lost)
+        # offset) is tiny and the step would send the offset to its bound, losing a slow ship's start
         gain_first = [i for i in linear if i >= p or names[i] != "delta_r"]
 
         def polished(x, weighting):
@@ -506,8 +505,8 @@ class OutputError(Estimator):
         # a given start (a nearby window's estimate) is polished too when exploring is on (the
         # diagnosis, which starts candidates from other models' fits, keeps its figures without):
         # the interval states taken from the data (yaw acceleration 0) suit a hull whose rudder
-        # lead T3 is small, and a ship's T3 of 10 s put its own good estimate 170 times the noise
-        # away, behind a regression start at T1 = 0.01 s (bench vessels seed 3602010556)
+        # lead T3 is small; a ship with a rudder lead of many seconds puts even its own good
+        # estimate far from the data until the interval states are polished with it
         if explore:
             first_polished = 0
         else:
@@ -526,9 +525,8 @@ class OutputError(Estimator):
             accelerations of the intervals' starts back at zero (the ones fitted with a small T2
             mean nothing with a larger one) and, with ``explore``, searched with T2 held
             (VALLEY_HELD_ITERATIONS: the gain, T1 and alpha follow T2 up the valley, which a variant
-            alone does not; bench vessels seed 1753784558, a ship with T2 2.4 s, crawled 90
-            iterations to T2 0.1 s; the diagnosis keeps the variants alone, its figures were
-            measured so)."""
+            alone does not, and a search from a small T2 crawls along the flat valley for many
+            iterations; the diagnosis keeps the variants alone, its figures were measured so)."""
             variants = self._valley_starts(names, x[:p])
             if not variants:
                 return x, 0
@@ -602,8 +600,7 @@ class OutputError(Estimator):
         if "T2" in names and np.isclose(params["T1"], params["T2"], rtol=AT_BOUND_SHARE):
             # the poles met: the search sits on the fold T1 = T2 of the symmetric pair, at the edge
             # of real time constants; their sum and product are determined there, neither alone
-            # (bench vessels seed 619072864, T3 > T1: T1 = T2 = 0.68 s +- 1 % published OK,
-            # truth 1.26 and 0.33 s)
+            # (a hull whose rudder lead exceeds its main time constant lands there)
             std_errors["T1"] = std_errors["T2"] = float("inf")
             flags.append("repeated_time_constants")
         info = {

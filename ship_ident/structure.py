@@ -155,7 +155,7 @@ class Structure:
         if self.form == "acceleration" and "a1" not in params:
             for name in NOMOTO_NAMES:
                 out.pop(name, None)
-            inertia = params["T"] if "T" in params else params["T1"] * params["T2"]
+            inertia = params["T"] if self.order == 1 else params["T1"] * params["T2"]
             if self.order == 1:
                 out.update(b=params["K"] / inertia, a1=1.0 / inertia)
             else:
@@ -281,7 +281,9 @@ class Structure:
 
     def fastest_time_constant(self, params: dict) -> float:
         """The fastest time scale of the linear model (s), which sets the integration step."""
-        return fastest_time_constant(params)
+        if self.form == "nomoto":
+            return params["T"] if self.order == 1 else min(params["T1"], params["T2"])
+        return fastest_time_constant({n: params[n] for n in self.base_names})
 
     def effective_inputs(
         self, params: dict, time: np.ndarray, rudder: np.ndarray, speed: np.ndarray | None
@@ -384,12 +386,11 @@ class Structure:
 
 
 def fastest_time_constant(params: dict) -> float:
-    """The fastest time scale (s) of a base model's parameters in either form: T, min(T1, T2), or
-    the fast pole's time of the acceleration form (1 / |a1|; 1 / max(c1, sqrt|a1|))."""
-    if "T" in params:
-        return float(params["T"])
-    if "T1" in params:
-        return float(min(params["T1"], params["T2"]))
+    """The fastest time scale (s) of a base model's parameters in either form: the smallest of T, T1
+    and T2 given, or the fast pole's time of the acceleration form (1 / |a1|; 1 / max(c1, sqrt|a1|))."""
+    nomoto = [params[n] for n in ("T", "T1", "T2") if n in params]
+    if nomoto:
+        return float(min(nomoto))
     if "c1" in params:
         return float(1.0 / max(params["c1"], np.sqrt(abs(params["a1"])), 1e-3))
     return float(1.0 / max(abs(params["a1"]), 1e-3))

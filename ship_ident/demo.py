@@ -107,6 +107,7 @@ class Listener:
     def __init__(self, domain_id: int, node_name: str = "ship_ident"):
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import Vector3Stamped
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
         from std_msgs.msg import Float64, Float64MultiArray, String
@@ -122,6 +123,7 @@ class Listener:
         self.diagnostics: list = []
         self.diagnoses: list[dict] = []  # ~/diagnosis
         self.held_out_errors: list[float] = []  # ~/held_out_error, rad/s
+        self.predicted: list[tuple[float, float]] = []  # ~/predicted_yaw_rate: (stamp s, rad/s)
         self.node.create_subscription(
             String, f"/{node_name}/estimate", lambda m: self.estimates.append(json.loads(m.data)), 100
         )
@@ -132,6 +134,12 @@ class Listener:
         )
         self.node.create_subscription(
             Float64, f"/{node_name}/held_out_error", lambda m: self.held_out_errors.append(m.data), 100
+        )
+        self.node.create_subscription(
+            Vector3Stamped,
+            f"/{node_name}/predicted_yaw_rate",
+            lambda m: self.predicted.append((m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, m.vector.z)),
+            1000,
         )
 
     def spin(self, seconds: float, until=None) -> bool:

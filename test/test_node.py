@@ -4,14 +4,16 @@ import itertools
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
 from ship_ident.commands.play import Player
-from ship_ident.demo import Listener, ros_environment, shut_down, start_node, start_play
+from ship_ident.demo import Listener, ros_environment, shut_down, start_node, start_play, stop
 from ship_ident.io import read_samples, write_simulation
 from ship_ident.simulator import simulate
 
@@ -306,6 +308,59 @@ def test_node_stops_on_sigterm(env):
     finally:
         if node.poll() is None:
             node.kill()
+
+
+def test_the_diagnosis_child_leaves_ctrl_c_to_the_node():
+    """The node's diagnosis child, serving (it answered a job), outlives a SIGINT (a terminal's
+    Ctrl-C reaches the whole process group; the node ends the child itself)."""
+    from ship_ident.online_diagnosis import DiagnosisWorker
+    from ship_ident.simulator import simulate as simulate_trip
+
+    worker = DiagnosisWorker()
+    try:
+        window = simulate_trip("mixed", duration=30.0, seed=2).dataset  # too short: skipped at once
+        worker.submit((window, "nomoto2", ("rudder_offset",), 30.0))
+        deadline = time.monotonic() + 60.0
+        while (answer := worker.poll()) is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert answer is not None and answer["status"] == "skipped", answer
+        process = worker._process
+        os.kill(process.pid, signal.SIGINT)
+        process.join(timeout=2.0)
+        assert process.is_alive(), f"the child ended on SIGINT (exit code {process.exitcode})"
+    finally:
+        worker.close()
+
+
+def test_ctrl_c_to_the_process_group_stops_the_node_and_its_diagnosis_child_cleanly(env, domain_id, bag):
+    """SIGINT to the node's process group, as a terminal's Ctrl-C sends it, once the diagnosis child
+    has diagnosed the window (the child gets the signal too): exit code 0, no traceback."""
+    path, _ = bag
+    node = start_node(
+        env,
+        "use_sim_time:=true",
+        "window_length:=90.0",
+        "min_window_length:=30.0",
+        "diagnosis_period:=15.0",
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a shell gives a foreground job
+    )
+    listener = Listener(domain_id)
+    play = start_play(env, path, 5.0, stderr=subprocess.DEVNULL)
+    try:
+        diagnosed = listener.spin(90.0, lambda: any(d["status"] == "done" for d in listener.diagnoses))
+        assert diagnosed, listener.diagnoses
+        os.killpg(node.pid, signal.SIGINT)
+        out, err = node.communicate(timeout=30)
+    finally:
+        stop(play)
+        if node.poll() is None:
+            node.kill()
+        listener.close()
+    assert node.returncode == 0, err
+    assert "Traceback" not in err + out and "KeyboardInterrupt" not in err + out, err
 
 
 def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id, tmp_path):

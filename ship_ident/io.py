@@ -434,7 +434,8 @@ class BagWriter:
 
 
 def write_simulation(sim, path, fmt: str = "rosbag2") -> None:
-    """Write a Simulation's measurements as the DESIGN.md Float64 topics (or CSV), heading wrapped."""
+    """Write a Simulation's measurements as Float64 on the node's default input topics (or CSV),
+    heading wrapped."""
     d = sim.dataset
     columns = {"rudder": d.rudder, "heading": d.meta["wrapped_heading"], "yaw_rate": d.yaw_rate, "speed": d.speed}
     columns = {role: values for role, values in columns.items() if values is not None}

@@ -52,8 +52,7 @@ def add_parser(subparsers) -> None:
         "--dask): a fleet run into one table, see ship_ident/fleet.py",
     )
     add_data_args(parser)
-    add_model_args(parser)
-    parser.set_defaults(effects=",".join(DEFAULTS.effects), method=DEFAULTS.method)
+    add_model_args(parser, effects=DEFAULTS.effects, method=DEFAULTS.method)
     for name in ("window_length", "refit_period", "min_window_length", "gap_threshold", "change_ratio"):
         add_config_option(parser, name)
     add_config_option(parser, "rudder_limit", degrees=True)

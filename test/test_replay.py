@@ -240,3 +240,20 @@ def test_kvlcc2_zigzag_uncertainty_covers_the_scatter_and_is_not_saturated():
     assert coarse.returncode == 0 and any(json.loads(line)["new_estimate"] for line in coarse.stdout.splitlines())
     bad = replay(*args, "--sample-time", 1, "--gap-threshold", 0.5)
     assert bad.returncode == 2 and "gap_threshold must be 0" in bad.stderr
+
+
+def test_replay_prints_times_from_the_bags_start():
+    """A bag with absolute stamps: times from its first stamp, the bag's clock beside them."""
+    from ship_ident.commands.replay import bag_time, diagnosis_text
+
+    assert bag_time(130.0, 0.0) == "130 s"
+    start = 1_700_000_000.0
+    diagnosis = {
+        "stamp": start + 65.0,
+        "status": "skipped",
+        "reason": "the window holds 65 s",
+        "structure": {"model": "nomoto2", "effects": ["rudder_offset"]},
+    }
+    assert diagnosis_text(diagnosis, start) == (
+        "diagnosis at 65 s, bag clock 1700000065 s (rudder_offset): skipped: the window holds 65 s"
+    )

@@ -177,8 +177,8 @@ def run(args) -> int:
 
 def bag_time(stamp: float, start: float) -> str:
     """'65 s' from the bag's first stamp ``start`` (s), with the bag's clock when that is not the
-    start: '65 s (bag clock 1700000065 s)'."""
-    return f"{stamp - start:.0f} s" + (f" (bag clock {stamp:.0f} s)" if start else "")
+    start: '65 s, bag clock 1700000065 s'."""
+    return f"{stamp - start:.0f} s" + (f", bag clock {stamp:.0f} s" if start else "")
 
 
 def diagnosis_text(diagnosis: dict, start: float = 0.0) -> str:

@@ -56,7 +56,12 @@ def test_colcon_installs_executables_and_ament_marker(workspace):
     assert (install / "share" / "ship_ident" / "package.xml").is_file()
     assert (install / "share" / "ship_ident" / "bags" / "demo_seed001.mcap").is_file()
     share = install / "share" / "ship_ident"
-    for shipped in ("launch/ship_ident.launch.py", "config/ship_ident.yaml"):
+    for shipped in (
+        "launch/ship_ident.launch.py",
+        "config/ship_ident.yaml",
+        "config/foxglove_layout.json",
+        "config/plotjuggler_layout.xml",
+    ):
         assert (share / shipped).read_bytes() == (PACKAGE_ROOT / shipped).read_bytes(), shipped
     for executable in ("identifier_node", "ship-ident"):
         path = install / "lib" / "ship_ident" / executable

@@ -10,10 +10,10 @@ due is skipped and reported. Outputs (``outputs``, as replay writes them):
 ``~/parameters`` (Float64MultiArray, names in ``layout.dim[0].label``; only
 estimates with status OK, latched: transient local, depth 1), ``~/estimate``
 (JSON String, every refit with its status), ``~/gain_band`` (K and its 95 %
-band), ``~/predicted_yaw_rate`` (Vector3Stamped, rad/s in z: the newest
-estimate run free from the measured state, one value per yaw-rate sample,
-stamped with the sample's time and published when its run of
-``prediction_horizon`` s ends) and ``/diagnostics``.
+band), ``~/predicted_yaw_rate`` (Vector3Stamped, rad/s in z: the estimate in
+force run free from the measured state in runs of ``prediction_horizon`` s,
+one value per yaw-rate sample, stamped with the sample's time and published
+when its run ends) and ``/diagnostics``.
 Every ``diagnosis_period`` the window is diagnosed (``online_diagnosis``) in a
 child process at low priority, off the refit path: ``~/diagnosis`` (JSON
 String: verdict, candidates, held-out error, noise floor, the ``ros2 param

@@ -80,8 +80,10 @@ class YawRatePrediction:
     """``~/predicted_yaw_rate``: the model against the measurements, as a stream at the input rate.
 
     From the first yaw-rate sample after the first estimate on, the inputs are cut into runs of
-    ``prediction_horizon`` s. A run is simulated once, when its last sample has arrived (the
-    rudder it is driven by is only known then): the estimate in force when the run began
+    ``prediction_horizon`` s, each beginning at a yaw-rate sample. A run is simulated once, when a
+    sample of any input reaches its horizon (the rudder it is driven by is only known then; the
+    inputs arrive in time order, as the node stamps them and as a bag holds them): the estimate
+    in force when the run began
     (``update``; any status) run free with the core's ``Structure.simulate`` from the measured
     heading and yaw rate at the run's start (yaw acceleration 0) over the measured rudder
     resampled to ``sample_time``, read at the run's yaw-rate sample times. ``add`` returns the
@@ -121,7 +123,9 @@ class YawRatePrediction:
         return self._predict(*finished) if finished else []
 
     def _take(self, sample: Sample) -> tuple | None:
-        """Store ``sample`` in the run in progress (or before it); the run it ends, if any."""
+        """Store ``sample`` in the run in progress (or before it); the run it ends, if any. A sample
+        of any input at or past the run's horizon ends it (an input falling silent cannot make a run
+        grow); the next run begins at the next yaw-rate sample."""
         if sample.time < self._run_start - self._config.clock_jump_threshold:  # the clock went back
             self._forget()
         role, point = sample.role, (sample.time, sample.value)
@@ -129,16 +133,14 @@ class YawRatePrediction:
         if not math.isfinite(sample.value) or (newest is not None and sample.time <= newest[0]):
             return None
         finished = None
-        if role == "yaw_rate" and self._estimate is not None:
-            if math.isnan(self._run_start):
-                self._begin(sample.time)
-            elif sample.time >= self._run_start + self._config.prediction_horizon:
-                finished = self._take_run()
-                self._begin(sample.time)
         if math.isnan(self._run_start):
             self._last[role] = point
         else:
             self._run[role].append(point)
+            if sample.time >= self._run_start + self._config.prediction_horizon:
+                finished = self._take_run()  # its inputs reach its end; their newest open the next run
+        if math.isnan(self._run_start) and role == "yaw_rate" and self._estimate is not None:
+            self._run_start, self._run_estimate = sample.time, self._estimate  # from this measured state
         return finished
 
     def flush(self) -> list[tuple[float, float]]:
@@ -150,18 +152,17 @@ class YawRatePrediction:
             self._forget()
         return self._predict(*finished)
 
-    def _begin(self, start: float) -> None:
-        self._run_start, self._run_estimate = start, self._estimate
-
     def _take_run(self) -> tuple:
         """(estimate, config, start s, samples per role with the newest before the run first) of the
-        run in progress; the newest sample of each role is kept to open the next run."""
+        run in progress, which ends; the newest sample of each role is kept to open the next run."""
         series = {role: ([self._last[role]] if self._last[role] else []) + self._run[role] for role in ROLES}
         for role in ROLES:
             if series[role]:
                 self._last[role] = series[role][-1]
             self._run[role] = []
-        return self._run_estimate, self._config, self._run_start, series
+        finished = self._run_estimate, self._config, self._run_start, series
+        self._run_start, self._run_estimate = math.nan, None
+        return finished
 
     def _forget(self) -> None:
         self._run_start, self._run_estimate = math.nan, None
@@ -170,8 +171,8 @@ class YawRatePrediction:
 
     @staticmethod
     def _predict(estimate, config: OnlineConfig, start: float, series: dict) -> list[tuple[float, float]]:
-        """The run that began at ``start`` (s) simulated once, read at its yaw-rate samples; [] when
-        it cannot be (too few samples, a model needing an input the run lacks)."""
+        """The run that began at ``start`` (s) simulated once, read at its yaw-rate samples before
+        its horizon; [] when it cannot be (too few samples, a model needing an input the run lacks)."""
         structure, parameters = estimate
         roles = [r for r in ROLES if r != "speed" or structure.needs_speed]
         if any(len(series[r]) < 2 for r in roles):
@@ -184,7 +185,7 @@ class YawRatePrediction:
         except (DataError, StructureError, ValueError):
             return []
         stamps = arrays["yaw_rate"][:, 0]
-        end = dataset.time[-1] + 0.5 * config.sample_time
-        inside = stamps[(stamps >= max(start, dataset.time[0])) & (stamps <= end)]
+        simulated = (stamps >= dataset.time[0]) & (stamps <= dataset.time[-1] + 0.5 * config.sample_time)
+        inside = stamps[simulated & (stamps >= start) & (stamps < start + config.prediction_horizon)]
         values = np.interp(inside, dataset.time, predicted)
         return [(float(t), float(v)) for t, v in zip(inside, values) if math.isfinite(v)]

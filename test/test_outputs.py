@@ -112,3 +112,22 @@ def test_the_prediction_stream_leaves_out_bad_samples_and_restarts_after_the_clo
     assert predicted and all(math.isfinite(v) for _, v in predicted)
     again, _ = feed(prediction, d)  # the same times again: the clock went back, the runs start afresh
     assert again == predicted
+
+
+def test_a_silent_yaw_rate_ends_the_run_and_the_stream_resumes_with_it(trip):
+    """The yaw rate falls silent for 30 s: the other inputs end the run at its horizon (what is
+    kept stays within one run), nothing is predicted in the silence, and runs begin again with the
+    yaw rate."""
+    config = OnlineConfig(prediction_horizon=10.0)
+    prediction = YawRatePrediction(config)
+    prediction.update(record(parameters={k: trip.truth[k] for k in NAMES}), config)
+    d = trip.dataset
+    predicted = []
+    for i, t in enumerate(d.time):
+        silent = 40.0 <= t < 70.0
+        for role in ("rudder", "heading") + (() if silent else ("yaw_rate",)):
+            predicted += prediction.add(Sample(float(t), role, float(getattr(d, role)[i])))
+        assert len(prediction._run["rudder"]) <= 101
+    stamps = np.array([t for t, _ in predicted])
+    assert not np.any((stamps >= 40.0) & (stamps < 70.0))
+    assert np.sum(stamps >= 70.0) >= 0.9 * np.sum((d.time >= 70.0) & (d.time < d.time[-1] - 10.0))

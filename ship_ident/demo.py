@@ -104,10 +104,14 @@ def shut_down(node: subprocess.Popen, listener, *feeders: subprocess.Popen | Non
 class Listener:
     """An in-process rclpy node on its own context that collects the identifier's outputs."""
 
-    def __init__(self, domain_id: int, node_name: str = "ship_ident"):
+    def __init__(self, domain_id: int, node_name: str = "ship_ident", latched_parameters: bool = False):
+        """``latched_parameters``: subscribe to ``~/parameters`` as an autopilot does (transient local,
+        depth 1: the last trusted estimate arrives at once, however late the subscription)."""
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import Vector3Stamped
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rclpy.signals import SignalHandlerOptions
         from std_msgs.msg import Float64, Float64MultiArray, String
 
@@ -122,16 +126,30 @@ class Listener:
         self.diagnostics: list = []
         self.diagnoses: list[dict] = []  # ~/diagnosis
         self.held_out_errors: list[float] = []  # ~/held_out_error, rad/s
+        self.predicted: list[tuple[float, float]] = []  # ~/predicted_yaw_rate: (stamp s, rad/s)
         self.node.create_subscription(
             String, f"/{node_name}/estimate", lambda m: self.estimates.append(json.loads(m.data)), 100
         )
-        self.node.create_subscription(Float64MultiArray, f"/{node_name}/parameters", self.parameters.append, 100)
+        parameters_qos = (
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            if latched_parameters
+            else 100
+        )
+        self.node.create_subscription(
+            Float64MultiArray, f"/{node_name}/parameters", self.parameters.append, parameters_qos
+        )
         self.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: self.diagnostics.extend(m.status), 100)
         self.node.create_subscription(
             String, f"/{node_name}/diagnosis", lambda m: self.diagnoses.append(json.loads(m.data)), 100
         )
         self.node.create_subscription(
             Float64, f"/{node_name}/held_out_error", lambda m: self.held_out_errors.append(m.data), 100
+        )
+        self.node.create_subscription(
+            Vector3Stamped,
+            f"/{node_name}/predicted_yaw_rate",
+            lambda m: self.predicted.append((m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, m.vector.z)),
+            1000,
         )
 
     def spin(self, seconds: float, until=None) -> bool:

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import Stores, get_typestore
@@ -58,6 +59,19 @@ IMU = "sensor_msgs/msg/Imu"
 VELOCITY_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistStamped")
 TWIST_STAMPED = VELOCITY_TYPES[1]
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+_INFINITE = QosTime(2147483647, 4294967295)  # rmw's "no deadline, no lifespan" as rosbag2 records it
+# A latched topic as ``ros2 bag record`` stores its publisher's offer: reliable, transient local, keep last 1.
+LATCHED_QOS = Qos(
+    QosHistory.KEEP_LAST,
+    1,
+    QosReliability.RELIABLE,
+    QosDurability.TRANSIENT_LOCAL,
+    _INFINITE,
+    _INFINITE,
+    QosLiveliness.AUTOMATIC,
+    _INFINITE,
+    avoid_ros_namespace_conventions=False,
+)
 DEFAULT_TOPICS = Topics()  # the node's default topic names
 BAD_BAG_ERRORS = (
     AnyReaderError,
@@ -391,10 +405,13 @@ class BagWriter:
         self._writer.open()
         self._connections: dict[str, object] = {}
 
-    def write(self, topic: str, msgtype: str, msg, time_s: float) -> None:
+    def write(self, topic: str, msgtype: str, msg, time_s: float, latched: bool = False) -> None:
+        """``latched`` (taken at a topic's first message): recorded as offered with transient-local
+        durability, depth 1, so that ``ros2 bag play`` republishes it latched."""
         connection = self._connections.get(topic)
         if connection is None:
-            connection = self._writer.add_connection(topic, msgtype, typestore=typestore())
+            qos = [LATCHED_QOS] if latched else []
+            connection = self._writer.add_connection(topic, msgtype, typestore=typestore(), offered_qos_profiles=qos)
             self._connections[topic] = connection
         elif connection.msgtype != msgtype:
             raise ValueError(f"topic {topic} was opened as {connection.msgtype}, not {msgtype}")
@@ -417,7 +434,8 @@ class BagWriter:
 
 
 def write_simulation(sim, path, fmt: str = "rosbag2") -> None:
-    """Write a Simulation's measurements as the DESIGN.md Float64 topics (or CSV), heading wrapped."""
+    """Write a Simulation's measurements as Float64 on the node's default input topics (or CSV),
+    heading wrapped."""
     d = sim.dataset
     columns = {"rudder": d.rudder, "heading": d.meta["wrapped_heading"], "yaw_rate": d.yaw_rate, "speed": d.speed}
     columns = {role: values for role, values in columns.items() if values is not None}

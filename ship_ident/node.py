@@ -6,14 +6,19 @@ arrival with the node's clock, so ``use_sim_time`` with ``/clock`` works. A
 timer checks the refit schedule and hands each refit to one worker thread
 (between refits, the quick change test: ``OnlineIdentifier.watch``);
 callbacks never wait for a fit, and a refit still running when the next is
-due is skipped and reported. Outputs: ``~/parameters``
-(Float64MultiArray, names in ``layout.dim[0].label``), ``~/estimate`` (JSON
-String), ``~/predicted_yaw_rate`` (Float64, rad/s) and ``/diagnostics``.
+due is skipped and reported. Outputs (``outputs``, as replay writes them):
+``~/parameters`` (Float64MultiArray, names in ``layout.dim[0].label``; only
+estimates with status OK, latched: transient local, depth 1), ``~/estimate``
+(JSON String, every refit with its status), ``~/gain_band`` (K and its 95 %
+band), ``~/predicted_yaw_rate`` (Vector3Stamped, rad/s in z: the estimate in
+force run free from the measured state in runs of ``prediction_horizon`` s,
+one value per yaw-rate sample, stamped with the sample's time and published
+when its run ends) and ``/diagnostics``.
 Every ``diagnosis_period`` the window is diagnosed (``online_diagnosis``) in a
 child process at low priority, off the refit path: ``~/diagnosis`` (JSON
 String: verdict, candidates, held-out error, noise floor, the ``ros2 param
-set`` that adds the missing effect), ``~/held_out_error`` (Float64, rad/s)
-and a ``missing_effect`` WARN in ``/diagnostics``; with ``auto_add_effects``
+set`` that adds the missing effect), ``~/held_out_error`` and
+``~/noise_floor`` (Float64, rad/s) and a ``missing_effect`` WARN in ``/diagnostics``; with ``auto_add_effects``
 the node adds (and may remove again) an effect itself, through its own
 ``effects`` parameter, and logs it.
 Once per refit the ROS graph is checked for publishers of another message
@@ -40,12 +45,14 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import fields
 
 import rclpy
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Vector3, Vector3Stamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
@@ -53,9 +60,19 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 from .estimate_log import EstimateLog
 from .io import FLOAT64, IMU, Sample, imu_samples
 from .jsonio import dumps_json
-from .online import CONDITION_LEVELS, OnlineIdentifier
+from .online import OnlineIdentifier
 from .online_config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
 from .online_diagnosis import MIN_WINDOW_S, DiagnosisWorker, OnlineDiagnosis
+from .outputs import (
+    DIAGNOSTIC_NAME,
+    GAIN_BAND_LABELS,
+    PREDICTION_FRAME,
+    YawRatePrediction,
+    diagnostic_status,
+    error_and_floor,
+    gain_band,
+    trusted_parameters,
+)
 
 NODE_NAME = "ship_ident"
 # The schedule is checked this many times per refit period, and between refits the newest data are
@@ -77,6 +94,14 @@ RELIABILITY = {
 CONFIG_NAMES = OnlineConfig.field_names()
 SETTING_NAMES = [f.name for f in fields(NodeSettings)]
 DIAGNOSTIC_LEVELS = {0: DiagnosticStatus.OK, 1: DiagnosticStatus.WARN, 2: DiagnosticStatus.ERROR}
+# ~/parameters: what an autopilot steers by, latched so that one starting late gets the last trusted
+# estimate at once (its subscription must be transient local too to receive it)
+LATCHED = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 
 
 def parameter_descriptors() -> dict:
@@ -122,12 +147,16 @@ class IdentifierNode(Node):
             if settings.log_directory
             else None
         )
-        self.parameters_pub = self.create_publisher(Float64MultiArray, "~/parameters", 10)
+        self.parameters_pub = self.create_publisher(Float64MultiArray, "~/parameters", LATCHED)
         self.estimate_pub = self.create_publisher(String, "~/estimate", 10)
-        self.predicted_pub = self.create_publisher(Float64, "~/predicted_yaw_rate", 10)
+        self.gain_band_pub = self.create_publisher(Float64MultiArray, "~/gain_band", 10)
+        # a run of prediction_horizon s at the input rate comes at once: the depth holds a run at 100 Hz
+        self.predicted_pub = self.create_publisher(Vector3Stamped, "~/predicted_yaw_rate", 1000)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.diagnosis_pub = self.create_publisher(String, "~/diagnosis", 10)
         self.held_out_error_pub = self.create_publisher(Float64, "~/held_out_error", 10)
+        self.noise_floor_pub = self.create_publisher(Float64, "~/noise_floor", 10)
+        self.prediction = YawRatePrediction(self.identifier.config)
         worker = DiagnosisWorker()
         config = self.identifier.config
         if config.diagnosis_period > 0 and config.window_length >= MIN_WINDOW_S:
@@ -221,18 +250,34 @@ class IdentifierNode(Node):
 
     def _on_value(self, role: str, value) -> None:
         try:
-            if self.identifier.add(Sample(self._now(), role, float(value))) == "duplicate":
-                with self._stall_lock:  # stamped on arrival: the clock stood still since its last message
-                    self._stalled += 1
+            self._take(Sample(self._now(), role, float(value)))
         except Exception as exc:  # a message must never stop the node
             self._report_callback_error(exc)
 
     def _on_imu(self, msg: Imu) -> None:
         try:
             for sample in imu_samples(msg, self._now()):
-                self.identifier.add(sample)
+                self._take(sample)
         except Exception as exc:  # a message must never stop the node
             self._report_callback_error(exc)
+
+    def _take(self, sample: Sample) -> None:
+        """An input sample into the window and, when accepted, the prediction stream (whose run it
+        may end: that run's predicted yaw rates are published)."""
+        outcome = self.identifier.add(sample)
+        if outcome == "accepted":
+            self._publish_predictions(self.prediction.add(sample))
+        elif outcome == "duplicate":
+            with self._stall_lock:  # stamped on arrival: the clock stood still since its last message
+                self._stalled += 1
+
+    def _publish_predictions(self, predicted: list[tuple[float, float]]) -> None:
+        for stamp, value in predicted:
+            message = Vector3Stamped(vector=Vector3(x=math.nan, y=math.nan, z=value))
+            seconds = math.floor(stamp)
+            message.header.stamp = Time(sec=int(seconds), nanosec=min(int(round((stamp - seconds) * 1e9)), 999_999_999))
+            message.header.frame_id = PREDICTION_FRAME
+            self.predicted_pub.publish(message)
 
     def _report_callback_error(self, exc: Exception) -> None:
         self._callback_errors += 1
@@ -278,6 +323,7 @@ class IdentifierNode(Node):
             with self._stall_lock:  # read as the refit counts its rejected samples: a long fit overlaps
                 stalled, self._stalled = self._stalled, 0  # the next period's messages
             record = self.identifier.refit(now)
+            self.prediction.update(record, self.identifier.config)
             effects = self.diagnosis.after_refit(record, self.identifier)
             if effects is not None:
                 self._auto_effects = effects
@@ -303,53 +349,44 @@ class IdentifierNode(Node):
             self._publish(record)
         except Exception as exc:
             self.get_logger().error(f"refit failed: {type(exc).__name__}: {exc}")
-            self._publish_diagnostics(now, 2, {"refit_failed": f"{type(exc).__name__}: {exc}"}, {})
+            failure = f"{type(exc).__name__}: {exc}"
+            self._publish_diagnostics(2, f"refit failed: {failure}", [("condition/refit_failed", failure)])
 
     def _publish(self, record) -> None:
-        data = record.to_json()
-        estimate_msg = String()
-        estimate_msg.data = dumps_json(data)
-        self.estimate_pub.publish(estimate_msg)
-        if data["parameters"] and all(math.isfinite(v) for v in data["parameters"].values()):
-            names = list(data["parameters"])
-            msg = Float64MultiArray()
-            msg.layout.dim = [MultiArrayDimension(label=",".join(names), size=len(names), stride=len(names))]
-            msg.data = [float(data["parameters"][n]) for n in names]
-            self.parameters_pub.publish(msg)
-        if math.isfinite(record.predicted_yaw_rate):
-            self.predicted_pub.publish(Float64(data=record.predicted_yaw_rate))
-        values = {k: str(v) for k, v in record.counts.items()}
-        values["callback_errors"] = str(self._callback_errors)
-        if data["parameters"]:
-            values.update({k: f"{v:.6g}" for k, v in data["parameters"].items()})
-            values["rmse_yaw_rate"] = f"{data['fit'].get('rmse_yaw_rate', math.nan):.6g}"
-        values["refit_seconds"] = f"{record.compute_seconds:.4f}"
-        self._publish_diagnostics(record.time, record.level, record.conditions, values)
+        self.estimate_pub.publish(String(data=dumps_json(record.to_json())))
+        trusted = trusted_parameters(record)
+        if trusted is not None:
+            self.parameters_pub.publish(multi_array(*trusted))
+        band = gain_band(record)
+        if band is not None:
+            self.gain_band_pub.publish(multi_array(GAIN_BAND_LABELS, band))
+        level, message, values = diagnostic_status(record, {"callback_errors": self._callback_errors})
+        self._publish_diagnostics(level, message, values)
         if record.diagnosis is not None:
             self._publish_diagnosis(record.diagnosis)
 
     def _publish_diagnosis(self, diagnosis: dict) -> None:
-        """``~/diagnosis`` (JSON), ``~/held_out_error`` (rad/s) and auto-add's announcement in the log."""
+        """``~/diagnosis`` (JSON), ``~/held_out_error`` and ``~/noise_floor`` (rad/s) and auto-add's
+        announcement in the log."""
         self.diagnosis_pub.publish(String(data=dumps_json(diagnosis)))
-        if diagnosis["status"] == "done":
-            self.held_out_error_pub.publish(Float64(data=float(diagnosis["held_out_error"])))
+        finished = error_and_floor(diagnosis)
+        if finished is not None:
+            self.held_out_error_pub.publish(Float64(data=finished[0]))
+            self.noise_floor_pub.publish(Float64(data=finished[1]))
         auto_add = diagnosis.get("auto_add")
         if auto_add and auto_add["action"] == "kept":  # one severity per call site (rclpy's rule)
             self.get_logger().info(f"auto-add: {auto_add['sentence']}")
         elif auto_add:
             self.get_logger().warning(f"auto-add: {auto_add['sentence']}")
 
-    def _publish_diagnostics(self, now: float, level: int, conditions: dict, values: dict) -> None:
+    def _publish_diagnostics(self, level: int, message: str, values: list) -> None:
         status = DiagnosticStatus(
             level=DIAGNOSTIC_LEVELS[level],
-            name=f"{NODE_NAME}: identification",
+            name=DIAGNOSTIC_NAME,
+            message=message,
             hardware_id=self.get_fully_qualified_name(),
+            values=[KeyValue(key=k, value=v) for k, v in values],
         )
-        ordered = sorted(conditions, key=lambda c: -CONDITION_LEVELS.get(c, 2))
-        status.message = "; ".join(f"{c.replace('_', ' ')}: {conditions[c]}" for c in ordered) or "estimating"
-        status.values = [KeyValue(key=f"condition/{c}", value=conditions[c]) for c in ordered] + [
-            KeyValue(key=k, value=v) for k, v in values.items()
-        ]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self.diagnostics_pub.publish(array)
@@ -359,6 +396,13 @@ class IdentifierNode(Node):
         self.destroy_timer(self._timer)
         self._worker.shutdown(wait=True, cancel_futures=True)
         self.diagnosis.close()
+
+
+def multi_array(names, values) -> Float64MultiArray:
+    """Values with their names comma-separated in ``layout.dim[0].label``."""
+    message = Float64MultiArray(data=[float(v) for v in values])
+    message.layout.dim = [MultiArrayDimension(label=",".join(names), size=len(names), stride=len(names))]
+    return message
 
 
 def make_executor():

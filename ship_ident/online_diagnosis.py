@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -155,7 +156,9 @@ class InlineRunner:
 
 
 def _serve(connection) -> None:
-    """Child process: diagnose each job received, send back the result."""
+    """Child process: diagnose each job received, send back the result. A terminal's Ctrl-C reaches
+    the whole process group: the child leaves it to the node, which ends it (``close``)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         try:
             job = connection.recv()

@@ -55,6 +55,14 @@ def test_colcon_installs_executables_and_ament_marker(workspace):
     assert (install / "share" / "ament_index" / "resource_index" / "packages" / "ship_ident").is_file()
     assert (install / "share" / "ship_ident" / "package.xml").is_file()
     assert (install / "share" / "ship_ident" / "bags" / "demo_seed001.mcap").is_file()
+    share = install / "share" / "ship_ident"
+    for shipped in (
+        "launch/ship_ident.launch.py",
+        "config/ship_ident.yaml",
+        "config/foxglove_layout.json",
+        "config/plotjuggler_layout.xml",
+    ):
+        assert (share / shipped).read_bytes() == (PACKAGE_ROOT / shipped).read_bytes(), shipped
     for executable in ("identifier_node", "ship-ident"):
         path = install / "lib" / "ship_ident" / executable
         assert path.is_file() and os.access(path, os.X_OK), path

@@ -4,15 +4,17 @@ import itertools
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
 from ship_ident.commands.play import Player
-from ship_ident.demo import Listener, ros_environment, shut_down, start_node, start_play
-from ship_ident.io import write_simulation
+from ship_ident.demo import Listener, ros_environment, shut_down, start_node, start_play, stop
+from ship_ident.io import read_samples, write_simulation
 from ship_ident.simulator import simulate
 
 pytestmark = [pytest.mark.slow, pytest.mark.node]  # every test here starts the node over real DDS
@@ -49,18 +51,35 @@ def node_process(env, *parameters):
     )
 
 
-def played_to_the_end(env, domain_id, path, rate: float):
-    """The node (defaults) and a listener while ``path`` plays at ``rate`` to its end and 1.5 s on;
-    the node still ran and shut down cleanly. The listener."""
+LAST_REFIT_TIMEOUT = 120.0  # s of wall time for the node to catch up with a bag that has ended
+REFIT_PERIOD = 5.0  # s, the node's default
+
+
+def played_to_the_end(env, domain_id, path, rate: float, while_running=None):
+    """The node (defaults) and a listener while ``path`` plays at ``rate``, until the node has
+    published its refit of the bag's end (one a refit period from it at least): paced by the node's
+    progress, not by the machine keeping the play rate. ``while_running(listener)`` runs then, the
+    node still up; it shuts down cleanly after. The listener."""
+    end = read_samples(path)[-1].time
     node = node_process(env)
     listener = Listener(domain_id)
     play = start_play(env, path, rate, stderr=subprocess.PIPE, text=True)
     try:
         while play.poll() is None:
             listener.spin(0.2)
-        listener.spin(1.5)
         assert play.returncode == 0, play.stderr.read()
+
+        def caught_up():
+            return bool(listener.estimates) and listener.estimates[-1]["stamp"] >= end - REFIT_PERIOD
+
+        reached = listener.spin(LAST_REFIT_TIMEOUT, caught_up)
+        newest = listener.estimates[-1]["stamp"] if listener.estimates else None
+        assert reached, (
+            f"the node's newest refit is at {newest} s of the bag's {end:g} s after {LAST_REFIT_TIMEOUT:g} s"
+        )
         assert node.poll() is None
+        if while_running is not None:
+            while_running(listener)
     finally:
         code, log = shut_down(node, listener, play)
     assert code == 0, log
@@ -71,14 +90,43 @@ def final_estimate(listener):
     return next(e for e in reversed(listener.estimates) if e["new_estimate"])
 
 
+def late_parameters(domain_id) -> list:
+    """What an autopilot subscribing to ~/parameters now receives within 10 s (transient local)."""
+    late = Listener(domain_id, node_name="ship_ident", latched_parameters=True)
+    try:
+        late.spin(10.0, lambda: bool(late.parameters))
+        late.spin(0.5)  # and nothing more: the last one only
+        return list(late.parameters)
+    finally:
+        late.close()
+
+
 def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
+    """The bag played at 10x: the node's estimate converges to the truth and to replay's twin; it
+    publishes on ~/parameters exactly its OK estimates, and an autopilot that subscribes after the
+    trip gets the last of them at once; ~/predicted_yaw_rate holds a value for nearly every yaw-rate
+    sample after the first estimate, close to the measurement."""
     path, truth = bag
-    listener = played_to_the_end(env, domain_id, path, 10.0)
+    late = []
+    listener = played_to_the_end(env, domain_id, path, 10.0, lambda _: late.extend(late_parameters(domain_id)))
     final = final_estimate(listener)
     assert final["stamp"] > 280.0 and final["status"] in ("OK", "WARN"), final["conditions"]
     assert final["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)
     assert listener.parameters[-1].layout.dim[0].label == "K,T1,T2,T3,delta_r,alpha"
     assert any(s.name == "ship_ident: identification" for s in listener.diagnostics)
+    trusted = [e for e in listener.estimates if e["status"] == "OK"]
+    assert trusted and len(listener.parameters) == len(trusted)
+    assert [list(m.data) for m in listener.parameters] == [list(e["parameters"].values()) for e in trusted]
+    assert len(late) == 1 and list(late[0].data) == list(listener.parameters[-1].data)
+    assert late[0].layout.dim[0].label == listener.parameters[-1].layout.dim[0].label
+    sim_time, sim_yaw_rate = (
+        np.array([getattr(s, k) for s in read_samples(path) if s.role == "yaw_rate"]) for k in ("time", "value")
+    )
+    first = min(e["stamp"] for e in listener.estimates if e["parameters"])
+    stamps, predicted = np.array(listener.predicted).T
+    assert len(stamps) >= 0.9 * np.sum(sim_time >= first) and np.all(np.diff(stamps) > 0)
+    error = predicted - np.interp(stamps, sim_time, sim_yaw_rate)  # stamped on arrival: within a /clock step
+    assert math.degrees(np.sqrt(np.mean(error**2))) < 0.5  # deg/s
     replayed = subprocess.run(
         [sys.executable, "-m", "ship_ident.cli", "replay", str(path), "--json"],
         capture_output=True,
@@ -161,7 +209,10 @@ def test_effects_change_at_run_time(env, domain_id, bag):
     assert code == 0, log
     after = final_estimate(listener)
     assert "delta_r" not in after["parameters"] and "r_bias" in after["parameters"]
-    assert listener.parameters[-1].layout.dim[0].label == "K,T1,T2,T3,r_bias"
+    assert list(after["parameters"]) == ["K", "T1", "T2", "T3", "r_bias"]
+    # ~/parameters: the OK estimates alone, each with its own model's names
+    trusted = [",".join(e["parameters"]) for e in listener.estimates if e["status"] == "OK"]
+    assert [m.layout.dim[0].label for m in listener.parameters] == trusted
     # the bag's gyro reads true (no bias in its truth): the new parameter is estimated, near zero
     assert abs(math.degrees(after["parameters"]["r_bias"])) < 0.05  # deg/s
     assert after["stamp"] > before["stamp"]
@@ -260,6 +311,59 @@ def test_node_stops_on_sigterm(env):
     finally:
         if node.poll() is None:
             node.kill()
+
+
+def test_the_diagnosis_child_leaves_ctrl_c_to_the_node():
+    """The node's diagnosis child, serving (it answered a job), outlives a SIGINT (a terminal's
+    Ctrl-C reaches the whole process group; the node ends the child itself)."""
+    from ship_ident.online_diagnosis import DiagnosisWorker
+    from ship_ident.simulator import simulate as simulate_trip
+
+    worker = DiagnosisWorker()
+    try:
+        window = simulate_trip("mixed", duration=30.0, seed=2).dataset  # too short: skipped at once
+        worker.submit((window, "nomoto2", ("rudder_offset",), 30.0))
+        deadline = time.monotonic() + 60.0
+        while (answer := worker.poll()) is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert answer is not None and answer["status"] == "skipped", answer
+        process = worker._process
+        os.kill(process.pid, signal.SIGINT)
+        process.join(timeout=2.0)
+        assert process.is_alive(), f"the child ended on SIGINT (exit code {process.exitcode})"
+    finally:
+        worker.close()
+
+
+def test_ctrl_c_to_the_process_group_stops_the_node_and_its_diagnosis_child_cleanly(env, domain_id, bag):
+    """SIGINT to the node's process group, as a terminal's Ctrl-C sends it, once the diagnosis child
+    has diagnosed the window (the child gets the signal too): exit code 0, no traceback."""
+    path, _ = bag
+    node = start_node(
+        env,
+        "use_sim_time:=true",
+        "window_length:=90.0",
+        "min_window_length:=30.0",
+        "diagnosis_period:=15.0",
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a shell gives a foreground job
+    )
+    listener = Listener(domain_id)
+    play = start_play(env, path, 5.0, stderr=subprocess.DEVNULL)
+    try:
+        diagnosed = listener.spin(90.0, lambda: any(d["status"] == "done" for d in listener.diagnoses))
+        assert diagnosed, listener.diagnoses
+        os.killpg(node.pid, signal.SIGINT)
+        out, err = node.communicate(timeout=30)
+    finally:
+        stop(play)
+        if node.poll() is None:
+            node.kill()
+        listener.close()
+    assert node.returncode == 0, err
+    assert "Traceback" not in err + out and "KeyboardInterrupt" not in err + out, err
 
 
 def test_wrong_message_type_is_reported_and_estimates_are_logged(env, domain_id, tmp_path):

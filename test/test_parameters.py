@@ -44,7 +44,7 @@ def test_every_node_parameter_is_defined_once_with_a_description():
 def test_parameter_file_holds_exactly_the_parameters_with_their_defaults():
     text = (ROOT / "config" / "ship_ident.yaml").read_text()
     assert text == parameter_file(), "config/ship_ident.yaml is stale: python -m ship_ident.online_config"
-    values = yaml.safe_load(text)["ship_ident"]["ros__parameters"]
+    values = yaml.safe_load(text)["/**"]["ros__parameters"]
     assert list(values) == list(DEFINED)
     for name, (default, _) in DEFINED.items():
         expected = list(default) if isinstance(default, tuple) else default
@@ -107,6 +107,32 @@ def test_a_real_node_refuses_a_window_beyond_its_range(tmp_path, monkeypatch):
             assert not refused.successful and "window_length" in refused.reason
             assert taken.successful and node.identifier.config.window_length == 600.0
             assert node.describe_parameter("sample_time").floating_point_range[0].to_value == 1.0
+        finally:
+            node.shutdown()
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_a_namespaced_node_takes_its_values_from_the_parameter_file(tmp_path, monkeypatch):
+    """The shipped file is keyed /**: with -r __ns:=/boat1 (a namespaced or launched node) a value
+    in it is taken, not silently left for the default."""
+    rclpy = pytest.importorskip("rclpy")
+    node_module = pytest.importorskip("ship_ident.node")
+    text = parameter_file()
+    assert "    window_length: 180.0\n" in text
+    params = tmp_path / "boat1.yaml"
+    params.write_text(text.replace("    window_length: 180.0\n", "    window_length: 120.0\n"))
+    monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    context = rclpy.Context()
+    arguments = ["identifier_node", "--ros-args", "-r", "__ns:=/boat1", "--params-file", str(params)]
+    rclpy.init(args=arguments, context=context, domain_id=150 + (os.getpid() + 1) % 50)
+    try:
+        node = node_module.IdentifierNode(context=context)
+        try:
+            assert node.get_fully_qualified_name() == "/boat1/ship_ident"
+            assert node.identifier.config.window_length == 120.0
         finally:
             node.shutdown()
             node.destroy_node()

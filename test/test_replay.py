@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
@@ -47,34 +48,50 @@ def test_replay_json_lines_recover_truth(bag):
     assert final["window"]["end"] - final["window"]["start"] == pytest.approx(180.0, abs=0.5)
 
 
+def read_topics(path) -> tuple[dict, dict]:
+    """{topic: [(log time s, message)]} of an MCAP and {topic: offered QoS profiles}."""
+    with AnyReader([Path(path)], default_typestore=typestore()) as reader:
+        messages = {c.topic: [] for c in reader.connections}
+        for c, stamp, raw in reader.messages():
+            messages[c.topic].append((stamp * 1e-9, reader.deserialize(raw, c.msgtype)))
+        return messages, {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+
+
 @pytest.mark.slow
-def test_replay_out_mcap_reads_back_with_estimates(bag, tmp_path):
+def test_replay_out_mcap_holds_what_the_node_publishes(bag, tmp_path):
+    """Inputs, every refit's estimate and /diagnostics status, the parameters of exactly the OK
+    estimates (recorded latched), K's band, and the predicted yaw rate at the yaw-rate samples'
+    times for nearly every sample after the first estimate, close to the measurement."""
     path, truth = bag
     out = tmp_path / "identified.mcap"
     result = replay(path, "--out", out, "--effects", "rudder_offset", "--refit-period", "10.0")
     assert result.returncode == 0, result.stderr
     assert "real time" in result.stdout and "K =" in result.stdout
-    with AnyReader([out], default_typestore=typestore()) as reader:
-        topics = {c.topic for c in reader.connections}
-        assert {
-            "/usv/rudder",
-            "/usv/heading",
-            "/usv/yaw_rate",
-            "/ship_ident/estimate",
-            "/ship_ident/parameters",
-        } <= topics
-        estimates = [
-            json.loads(reader.deserialize(raw, c.msgtype).data)
-            for c, _, raw in reader.messages([c for c in reader.connections if c.topic == "/ship_ident/estimate"])
-        ]
-        parameters = [
-            reader.deserialize(raw, c.msgtype)
-            for c, _, raw in reader.messages([c for c in reader.connections if c.topic == "/ship_ident/parameters"])
-        ]
+    written, qos = read_topics(out)
+    assert {"/usv/rudder", "/usv/heading", "/usv/yaw_rate", "/ship_ident/gain_band", "/diagnostics"} <= set(written)
+    estimates = [json.loads(m.data) for _, m in written["/ship_ident/estimate"]]
     assert len(estimates) == 30  # every 10 s of 0 .. 300 s
     assert estimates[-1]["structure"]["effects"] == ["rudder_offset"]
-    assert parameters[-1].layout.dim[0].label == "K,T1,T2,T3,delta_r"
-    assert parameters[-1].data[0] == pytest.approx(truth["K"], rel=0.05)
+    ok = [e for e in estimates if e["status"] == "OK"]
+    parameters = written["/ship_ident/parameters"]
+    assert 0 < len(ok) < len(estimates) and [t for t, _ in parameters] == [e["stamp"] for e in ok]
+    assert [list(m.data) for _, m in parameters] == [list(e["parameters"].values()) for e in ok]
+    assert parameters[-1][1].layout.dim[0].label == "K,T1,T2,T3,delta_r"
+    assert parameters[-1][1].data[0] == pytest.approx(truth["K"], rel=0.05)
+    (latched,) = qos["/ship_ident/parameters"]
+    assert (latched.durability.name, latched.history.name, latched.depth) == ("TRANSIENT_LOCAL", "KEEP_LAST", 1)
+    statuses = [m.status[0] for _, m in written["/diagnostics"]]
+    assert [s.level for s in statuses] == [{"OK": 0, "WARN": 1, "ERROR": 2}[e["status"]] for e in estimates]
+    low, gain, high = written["/ship_ident/gain_band"][-1][1].data
+    last = estimates[-1]
+    assert gain == last["parameters"]["K"] and high - low == pytest.approx(2 * 1.96 * last["std_errors"]["K"], rel=1e-3)
+    first = min(e["stamp"] for e in estimates if e["parameters"])
+    yaw_rate = {t: m.data for t, m in written["/usv/yaw_rate"] if t >= first}
+    predicted = written["/ship_ident/predicted_yaw_rate"]
+    assert all(t in yaw_rate for t, _ in predicted) and len(predicted) >= 0.9 * len(yaw_rate)
+    assert all(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec == pytest.approx(t) for t, m in predicted)
+    error = np.array([m.vector.z - yaw_rate[t] for t, m in predicted])
+    assert math.degrees(np.sqrt(np.mean(error**2))) < 0.5  # deg/s: 10 s free runs of a right model
 
 
 @pytest.mark.parametrize(
@@ -110,7 +127,12 @@ def test_replay_diagnoses_the_trip_into_the_records_the_mcap_and_a_plot(bag, tmp
                 reader.deserialize(raw, c.msgtype).data
                 for c, _, raw in reader.messages([c for c in reader.connections if c.topic == topic])
             ]
-            for topic in ("/ship_ident/estimate", "/ship_ident/diagnosis", "/ship_ident/held_out_error")
+            for topic in (
+                "/ship_ident/estimate",
+                "/ship_ident/diagnosis",
+                "/ship_ident/held_out_error",
+                "/ship_ident/noise_floor",
+            )
         }
     records = [json.loads(text) for text in written["/ship_ident/estimate"]]
     diagnoses = [r["diagnosis"] for r in records if "diagnosis" in r]
@@ -123,6 +145,7 @@ def test_replay_diagnoses_the_trip_into_the_records_the_mcap_and_a_plot(bag, tmp
     assert not any("missing_effect" in r["conditions"] for r in records)
     assert [json.loads(text) for text in written["/ship_ident/diagnosis"]] == diagnoses
     assert written["/ship_ident/held_out_error"] == [d["held_out_error"] for d in done]
+    assert written["/ship_ident/noise_floor"] == [d["noise_floor"] for d in done]
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -217,3 +240,20 @@ def test_kvlcc2_zigzag_uncertainty_covers_the_scatter_and_is_not_saturated():
     assert coarse.returncode == 0 and any(json.loads(line)["new_estimate"] for line in coarse.stdout.splitlines())
     bad = replay(*args, "--sample-time", 1, "--gap-threshold", 0.5)
     assert bad.returncode == 2 and "gap_threshold must be 0" in bad.stderr
+
+
+def test_replay_prints_times_from_the_bags_start():
+    """A bag with absolute stamps: times from its first stamp, the bag's clock beside them."""
+    from ship_ident.commands.replay import bag_time, diagnosis_text
+
+    assert bag_time(130.0, 0.0) == "130 s"
+    start = 1_700_000_000.0
+    diagnosis = {
+        "stamp": start + 65.0,
+        "status": "skipped",
+        "reason": "the window holds 65 s",
+        "structure": {"model": "nomoto2", "effects": ["rudder_offset"]},
+    }
+    assert diagnosis_text(diagnosis, start) == (
+        "diagnosis at 65 s, bag clock 1700000065 s (rudder_offset): skipped: the window holds 65 s"
+    )

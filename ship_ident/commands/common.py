@@ -92,29 +92,37 @@ def sources(paths) -> str:
     return " + ".join(str(p) for p in paths)
 
 
-def add_model_args(parser: argparse.ArgumentParser, method: bool = True, threedof: bool = False) -> None:
-    """``--model``, ``--effects`` and (optionally) ``--method``; with ``threedof`` the model may be
-    seed 000's ``3dof`` (its --method defaults to tlssvm, so an unset --method is None)."""
+def add_model_args(
+    parser: argparse.ArgumentParser, effects=(), method: str = DEFAULT_METHOD, threedof_methods: tuple = ()
+) -> None:
+    """``--model``, ``--effects`` and ``--method``, their defaults the ``effects`` and ``method`` the
+    command runs with (its help shows those very values). With ``threedof_methods`` (its methods,
+    its default first) the model may be seed 000's ``3dof``, and an unset --method is None (the
+    command picks ``method`` or the 3-DOF default)."""
     parser.add_argument(
         "--model",
         default="nomoto2",
-        choices=tuple(BASE_MODELS) + (("3dof",) if threedof else ()),
-        help="base model (default %(default)s)" + ("; 3dof: seed 000's surge-sway-yaw model" if threedof else ""),
+        choices=tuple(BASE_MODELS) + (("3dof",) if threedof_methods else ()),
+        help="base model (default %(default)s)"
+        + ("; 3dof: seed 000's surge-sway-yaw model" if threedof_methods else ""),
     )
     parser.add_argument(
         "--effects",
-        default="",
+        default=",".join(effects),
         metavar="A,B",
-        help=f"comma-separated effects, any of {', '.join(EFFECTS)} (default: none)",
+        help=f"comma-separated effects, any of {', '.join(EFFECTS)} (default: {','.join(effects) or 'none'})",
     )
-    if method:
-        parser.add_argument(
-            "--method",
-            default=None if threedof else DEFAULT_METHOD,
-            metavar="NAME",
-            help=f"estimator: {', '.join(method_names())} (default {DEFAULT_METHOD}"
-            + ("; with --model 3dof: tlssvm or ols, default tlssvm)" if threedof else ")"),
-        )
+    threedof = (
+        f"; with --model 3dof: {' or '.join(threedof_methods)}, default {threedof_methods[0]}"
+        if threedof_methods
+        else ""
+    )
+    parser.add_argument(
+        "--method",
+        default=None if threedof_methods else method,
+        metavar="NAME",
+        help=f"estimator: {', '.join(method_names())} (default {method}{threedof})",
+    )
 
 
 def structure_from_args(args: argparse.Namespace) -> Structure:

@@ -25,8 +25,7 @@ def add_parser(subparsers) -> None:
         "and after the last listed effect is shown.",
     )
     add_recordings_arg(parser)
-    add_model_args(parser)
-    parser.set_defaults(method=DEFAULT_METHOD)
+    add_model_args(parser, method=DEFAULT_METHOD)
     parser.add_argument(
         "--validate",
         metavar="OTHER",

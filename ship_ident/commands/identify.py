@@ -19,6 +19,7 @@ from .common import (
     sources,
     structure_from_args,
 )
+from .threedof import METHODS as THREEDOF_METHODS
 from .threedof import add_threedof_args, run_identify
 
 
@@ -30,7 +31,7 @@ def add_parser(subparsers) -> None:
         "simulated data and report parameters, standard errors and the free-run fit.",
     )
     add_recordings_arg(parser)
-    add_model_args(parser, threedof=True)
+    add_model_args(parser, threedof_methods=THREEDOF_METHODS)
     parser.add_argument(
         "--save", metavar="MODEL.json", help="write the estimate as a model file for `ship-ident compare`"
     )

@@ -6,12 +6,16 @@ schedule, as fast as the machine allows. ``--json`` prints one JSON object
 per refit, one per line (JSON lines: the ``~/estimate`` record of the node).
 ``--out`` writes an MCAP with the input topics and the node's outputs
 ``/ship_ident/estimate`` and ``/ship_ident/parameters`` at the refit times,
-as the replay goes: Ctrl-C or SIGTERM stop it after the refit in progress
-and still leave a complete MCAP with every estimate up to then (exit code
-130 or 143). ``--diagnosis-period S`` diagnoses the window every S seconds
-as the node does (which effect the model misses, the held-out error against
-the noise floor): each diagnosis goes into the JSON record of its refit and
-into the MCAP (``/ship_ident/diagnosis``, ``/ship_ident/held_out_error``);
+as the replay goes, and the node's other outputs (the predicted yaw rate at
+the yaw-rate samples' times, K's band, ``/diagnostics``; ``parameters`` only
+for estimates with status OK): Ctrl-C or SIGTERM stop it after the refit in
+progress and still leave a complete MCAP with every estimate up to then (exit
+code 130 or 143). Times printed are from the bag's first stamp.
+``--diagnosis-period S`` diagnoses the window every S seconds as the node
+does (which effect the model misses, the held-out error against the noise
+floor): each diagnosis goes into the JSON record of its refit and into the
+MCAP (``/ship_ident/diagnosis``, ``/ship_ident/held_out_error``,
+``/ship_ident/noise_floor``);
 ``--diagnosis-plot FILE.png`` draws the held-out error over the trip.
 """
 
@@ -48,8 +52,7 @@ def add_parser(subparsers) -> None:
         "--dask): a fleet run into one table, see ship_ident/fleet.py",
     )
     add_data_args(parser)
-    add_model_args(parser)
-    parser.set_defaults(effects=",".join(DEFAULTS.effects), method=DEFAULTS.method)
+    add_model_args(parser, effects=DEFAULTS.effects, method=DEFAULTS.method)
     for name in ("window_length", "refit_period", "min_window_length", "gap_threshold", "change_ratio"):
         add_config_option(parser, name)
     add_config_option(parser, "rudder_limit", degrees=True)
@@ -137,11 +140,11 @@ def run(args) -> int:
         received.append(signum)
         stop.set()
 
-    def on_record(record):
+    def on_record(record, start):
         if args.json:
             print(dumps_json(record.to_json()), flush=True)
         elif record.diagnosis is not None:
-            print(diagnosis_text(record.diagnosis), flush=True)
+            print(diagnosis_text(record.diagnosis, start), flush=True)
 
     topics = topics_from_args(args)
     handlers = {signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)}
@@ -166,15 +169,23 @@ def run(args) -> int:
         except OSError as exc:
             raise CommandError(f"cannot write {args.diagnosis_plot}: {exc.strerror or exc}") from None
     if not args.json:
-        print_summary(result.records, result.duration, result.wall_seconds)
+        print_summary(result.records, result.duration, result.wall_seconds, result.start)
         if args.diagnosis_plot:
             print(f"held-out error plot: {args.diagnosis_plot}")
     return 0
 
 
-def diagnosis_text(diagnosis: dict) -> str:
-    """A finished diagnosis in a few lines, for people (angles in deg)."""
-    head = f"diagnosis at {diagnosis['stamp']:.0f} s ({'+'.join(diagnosis['structure']['effects']) or 'no effects'}):"
+def bag_time(stamp: float, start: float) -> str:
+    """'65 s' from the bag's first stamp ``start`` (s), with the bag's clock when that is not the
+    start: '65 s, bag clock 1700000065 s'."""
+    return f"{stamp - start:.0f} s" + (f", bag clock {stamp:.0f} s" if start else "")
+
+
+def diagnosis_text(diagnosis: dict, start: float = 0.0) -> str:
+    """A finished diagnosis in a few lines, for people (angles in deg; its time from the bag's first
+    stamp ``start``, s)."""
+    effects = "+".join(diagnosis["structure"]["effects"]) or "no effects"
+    head = f"diagnosis at {bag_time(diagnosis['stamp'], start)} ({effects}):"
     if diagnosis["status"] != "done":
         return f"{head} skipped: {diagnosis['reason']}"
     lines = [
@@ -259,8 +270,9 @@ def plot_diagnoses(records, path, title: str) -> None:
     plt.close(fig)
 
 
-def print_summary(records, duration: float, wall: float) -> None:
-    """The last estimate, its fit and the replay speed, for people."""
+def print_summary(records, duration: float, wall: float, start: float = 0.0) -> None:
+    """The last estimate, its fit and the replay speed, for people (times from the bag's first
+    stamp ``start``, s)."""
     fitted = [r for r in records if r.new_estimate]
     print(
         f"{len(records)} refits over {duration:.0f} s of bag in {wall:.1f} s "
@@ -270,7 +282,7 @@ def print_summary(records, duration: float, wall: float) -> None:
         return
     last = records[-1].to_json()
     print(
-        f"last refit at {last['stamp']:.1f} s: {last['status']}"
+        f"last refit at {bag_time(last['stamp'], start)}: {last['status']}"
         + "".join(f"\n  {c}: {m}" for c, m in last["conditions"].items())
     )
     if last["parameters"]:

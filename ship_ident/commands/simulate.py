@@ -12,14 +12,17 @@ import json
 from pathlib import Path
 
 from ..errors import CommandError
-from ..io import write_simulation
+from ..io import DEFAULT_TOPICS, write_simulation
 from ..simulator import MANEUVERS, VESSELS, simulate
 from ..structure import parse_effects
 from ..threedof import VESSELS as THREEDOF_VESSELS
+from .threedof import DEFAULT_VESSEL as THREEDOF_VESSEL
 from .threedof import add_threedof_args, run_simulate
 
 FORMATS = ("rosbag2", "mcap", "csv")
 MIN_SAMPLE_TIME = 0.01  # s, the simulator's internal integration step
+DEFAULT_VESSEL = "seed001"
+TOPICS = ", ".join((DEFAULT_TOPICS.rudder, DEFAULT_TOPICS.heading, DEFAULT_TOPICS.yaw_rate, DEFAULT_TOPICS.speed))
 
 
 def add_parser(subparsers) -> None:
@@ -27,7 +30,8 @@ def add_parser(subparsers) -> None:
         "simulate",
         help="simulate a manoeuvre and write it as a bag or CSV",
         description="Simulate a manoeuvre of a vessel preset with sensor noise and write the "
-        "measurements (DESIGN.md topics, heading wrapped) with the true parameters.",
+        f"measurements (std_msgs/Float64 on the node's input topics {TOPICS}; heading wrapped) "
+        "with the true parameters.",
     )
     parser.add_argument("--maneuver", required=True, choices=MANEUVERS)
     parser.add_argument(
@@ -47,7 +51,7 @@ def add_parser(subparsers) -> None:
         "--vessel",
         default=None,
         choices=sorted(VESSELS) + sorted(THREEDOF_VESSELS),
-        help="vessel preset (default seed001; with --model 3dof: dtc)",
+        help=f"vessel preset (default {DEFAULT_VESSEL}; with --model 3dof: {THREEDOF_VESSEL})",
     )
     parser.add_argument(
         "--effects",
@@ -96,7 +100,7 @@ def run(args) -> int:
     fmt = output_format(args.out, args.format)
     if args.model == "3dof":
         return run_simulate(args, fmt)
-    vessel = args.vessel or "seed001"
+    vessel = args.vessel or DEFAULT_VESSEL
     if vessel not in VESSELS:
         raise CommandError(
             f"the vessel {vessel!r} has a 3dof model only; add --model 3dof or choose {', '.join(sorted(VESSELS))}"

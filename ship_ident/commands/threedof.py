@@ -21,7 +21,8 @@ from ..threedof.model import VESSELS, simulate_manoeuvre
 from .common import say_columns, topics_from_args
 
 MODEL = "3dof"
-METHODS = ("tlssvm", "ols")
+METHODS = ("tlssvm", "ols")  # the default first
+DEFAULT_VESSEL = "dtc"
 MANOEUVRES = {"zigzag10": ("zigzag", 10.0), "zigzag20": ("zigzag", 20.0), "turning": ("turning", 35.0)}
 UNITS = {"surge": "m/s", "sway": "m/s", "yaw": "deg/s"}
 
@@ -69,7 +70,7 @@ def read_records(args: argparse.Namespace, paths) -> list[Record]:
 
 def solver(args: argparse.Namespace) -> str:
     """The 3-DOF solver name (``ols`` or ``tlssvm-RULE``) of --method and --truncation."""
-    method = args.method or "tlssvm"
+    method = args.method or METHODS[0]
     if method not in METHODS:
         raise CommandError(
             f"--model 3dof fits with --method {' or '.join(METHODS)}, not {method!r} "
@@ -189,7 +190,7 @@ def run_compare(args: argparse.Namespace, record: dict) -> int:
 
 def run_simulate(args: argparse.Namespace, fmt: str) -> int:
     """Simulate a 3-DOF manoeuvre of a preset and write it (CSV or bag) and its truth."""
-    vessel = args.vessel or "dtc"
+    vessel = args.vessel or DEFAULT_VESSEL
     if vessel not in VESSELS or not VESSELS[vessel].derivatives:
         usable = [name for name, v in VESSELS.items() if v.derivatives]
         raise CommandError(f"--model 3dof simulates the vessel {' or '.join(usable)}, not {vessel!r}")

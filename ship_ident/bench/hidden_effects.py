@@ -293,6 +293,7 @@ def run_mmg(quick: bool = False, seed: int = 0, count: int | None = None) -> dic
         "with_halving_effect": len(halved),
         "first_halves": share([r["first_halves"] for r in halved]),
         "missing_effect": share([r["verdict"] == "missing_effect" for r in halved]),
+        "determined": share([r["top_determined"] for r in halved]),
         "succeeded": share(
             [r["first_halves"] and r["verdict"] == "missing_effect" and r["top_determined"] for r in halved]
         ),
@@ -332,7 +333,8 @@ def render_mmg(result: dict) -> str:
         text,
         "",
         f"first candidate halves it: {100 * result['first_halves']:.0f} % of {halved} hulls; verdict missing_effect: "
-        f"{100 * result['missing_effect']:.0f} %; first halves it, missing_effect and every parameter determined: "
+        f"{100 * result['missing_effect']:.0f} %; every parameter of the first determined: "
+        f"{100 * result['determined']:.0f} %; first halves it, missing_effect and every parameter determined: "
         f"{100 * result['succeeded']:.0f} %",
         f"hulls without a halving effect called missing_effect: {100 * result['missing_effect_without_halving']:.0f} %",
         "hulls (replay one with run_mmg_hull(seed)):",
@@ -340,7 +342,9 @@ def render_mmg(result: dict) -> str:
     lines += [
         f"  seed {r['seed']} {r['hull']}: C' {r['stability_index']:+.4f}, pull-out r' {r['pull_out_turn_rate']:.3f}, "
         f"held-out heading error {r['rmse_heading_deg']:.1f} deg, first {r['top']} "
-        f"{100 * r['top_improvement_heading']:.0f} %, {r['verdict']}; halving: {', '.join(r['halving']) or 'none'}"
+        f"{100 * r['top_improvement_heading']:.0f} %"
+        + ("" if r["top_determined"] else f" ({', '.join(r['top_undetermined'])} undetermined)")
+        + f", {r['verdict']}; halving: {', '.join(r['halving']) or 'none'}"
         for r in result["rows"]
     ]
     return "\n".join(lines)

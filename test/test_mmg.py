@@ -102,7 +102,7 @@ def test_bench_hidden_effects_mmg_runs_end_to_end():
 
 
 def test_generator_applies_only_where_a_benchmark_has_several(capsys):
-    assert main(["bench", "vessels", "--generator", "mmg"]) == 2
+    assert main(["bench", "speed", "--generator", "mmg"]) == 2
     assert "--generator does not apply" in capsys.readouterr().err
     assert main(["bench", "hidden-effects", "--generator", "other"]) == 2
     assert "choose from ours, mmg, both" in capsys.readouterr().err

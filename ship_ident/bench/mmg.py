@@ -347,14 +347,18 @@ def _simulate(
     return MmgRun(dataset, u, v, r, psi, x, y, rudder)
 
 
-def simulate(hull: MmgHull, manoeuvre: str, seed: int, noise: Noise | None = None) -> MmgRun:
-    """``manoeuvre`` (one of ``MANOEUVRES``) on ``hull``, recorded at SAMPLE_TIME with sensor
-    ``noise`` (default ``simulator.Noise()``) drawn from ``seed``; the random steps too are drawn
-    from ``seed``. The run's noise-free states stay beside the recorded ``dataset``."""
+def simulate(
+    hull: MmgHull, manoeuvre: str, seed: int, noise: Noise | None = None, duration: float | None = None
+) -> MmgRun:
+    """``manoeuvre`` (one of ``MANOEUVRES``) on ``hull`` for ``duration`` (s, default the
+    manoeuvre's), recorded at SAMPLE_TIME with sensor ``noise`` (default ``simulator.Noise()``)
+    drawn from ``seed``; the random steps too are drawn from ``seed``. The run's noise-free states
+    stay beside the recorded ``dataset``; the heading is recorded unwrapped and, as a compass gives
+    it, wrapped to (-pi, pi] (``meta["wrapped_heading"]``)."""
     if manoeuvre not in MANOEUVRES:
         raise ValueError(f"unknown MMG manoeuvre {manoeuvre!r}; choose from {', '.join(MANOEUVRES)}")
     rng = np.random.default_rng(seed)
-    duration = MANOEUVRES[manoeuvre]
+    duration = MANOEUVRES[manoeuvre] if duration is None else float(duration)
     if manoeuvre == "steps":
         commands, t = [(0.0, 0.0)], EXECUTE_S
         while t < duration:
@@ -367,13 +371,19 @@ def simulate(hull: MmgHull, manoeuvre: str, seed: int, noise: Noise | None = Non
         run = _simulate(hull, [(0.0, 0.0), (EXECUTE_S, np.radians(float(manoeuvre[len("turning") :])))], duration)
     noise = noise or Noise()
     n = run.dataset.n_samples
+    heading = run.psi + noise.heading * rng.standard_normal(n)
     dataset = replace(
         run.dataset,
         rudder=run.rudder + noise.rudder * rng.standard_normal(n),
-        heading=run.psi + noise.heading * rng.standard_normal(n),
+        heading=heading,
         yaw_rate=run.r + noise.yaw_rate * rng.standard_normal(n),
         speed=run.dataset.speed + noise.speed * rng.standard_normal(n),
-        meta={"sample_time": SAMPLE_TIME, "source": f"mmg:{manoeuvre}", "hull": hull.name},
+        meta={
+            "sample_time": SAMPLE_TIME,
+            "source": f"mmg:{manoeuvre}",
+            "hull": hull.name,
+            "wrapped_heading": np.mod(heading + np.pi, 2 * np.pi) - np.pi,
+        },
     )
     return replace(run, dataset=dataset)
 

@@ -248,6 +248,8 @@ def run_mmg_hull(seed: int) -> dict:
                 "improvement_yaw_rate": c.improvement_yaw_rate,
                 "rmse_heading_after_deg": float(np.degrees(c.rmse_heading_after)),
                 "significant": c.significant,
+                "t_statistic": c.t_statistic,
+                "training_gain": c.training_gain,
             }
             for c in result.candidates
         },

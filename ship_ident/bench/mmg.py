@@ -171,7 +171,7 @@ def _shipmmg():
 def kvlcc2_hull(variation: dict | None = None) -> MmgHull:
     """The KVLCC2 7 m model with the factors ``variation`` (``VARIATION``'s names, default 1) on its
     coefficients, at its approach speed times ``variation['speed']``."""
-    mmg = _shipmmg()
+    mmg_3dof = _shipmmg()
     factors = {name: 1.0 for name in VARIATION}
     factors.update(variation or {})
     unknown = set(factors) - set(VARIATION)
@@ -181,7 +181,7 @@ def kvlcc2_hull(variation: dict | None = None) -> MmgHull:
     length, draught = p["L_pp"], p["d"]
     mass = WATER_DENSITY * p["displacement"]
     mass_scale = 0.5 * WATER_DENSITY * length**2 * draught
-    basic = mmg.Mmg3DofBasicParams(
+    basic = mmg_3dof.Mmg3DofBasicParams(
         L_pp=length,
         B=p["B"],
         d=draught,
@@ -213,7 +213,7 @@ def kvlcc2_hull(variation: dict | None = None) -> MmgHull:
     hull["N_v_dash"] *= factors["N_v"]
     for name in NONLINEAR_TERMS:
         hull[name] *= factors["nonlinear"]
-    maneuvering = mmg.Mmg3DofManeuveringParams(k_0=prop["k_0"], k_1=prop["k_1"], k_2=prop["k_2"], **hull)
+    maneuvering = mmg_3dof.Mmg3DofManeuveringParams(k_0=prop["k_0"], k_1=prop["k_1"], k_2=prop["k_2"], **hull)
     speed = KVLCC2_SPEED * factors["speed"]
     varied = {k: v for k, v in factors.items() if v != 1.0}
     name = "kvlcc2" + ("(" + ",".join(f"{k}={v:.3g}" for k, v in varied.items()) + ")" if varied else "")
@@ -285,10 +285,10 @@ def _rudder_history(times: np.ndarray, start_angle: float, commands: list[tuple[
 def _solve(hull: MmgHull, t0: float, t1: float, state: np.ndarray, rudder_at, event=None):
     """shipmmg's solution from ``state`` (u, v, r, x, y, psi) over [t0, t1] s, the rudder given as
     a function of time (``rudder_at``) on knots KNOT_STEP apart; ``event(t, X)`` stops it."""
-    mmg = _shipmmg()
+    mmg_3dof = _shipmmg()
     knots = np.append(np.arange(t0, t1, KNOT_STEP), t1)
     u, v, r, x, y, psi = state
-    return mmg.simulate_mmg_3dof(
+    return mmg_3dof.simulate_mmg_3dof(
         hull.basic,
         hull.maneuvering,
         knots,

@@ -91,7 +91,7 @@ KVLCC2_RUDDER = {  # rudder force and hull-rudder interaction
     "f_alpha": 2.747,  # rudder lift gradient (1/rad)
 }
 KVLCC2_SPEED = 1.179  # m/s, the model's approach speed (full scale 15.5 kn, Fn 0.142)
-RADIUS_OF_GYRATION = 0.25  # of the ship's yaw inertia I_zG = m (0.25 L)^2, as the paper takes it
+RADIUS_OF_GYRATION = 0.25  # of the ship's yaw inertia I_zG = m (0.25 L)^2 (as shipmmg's KVLCC2 tests)
 SCALE = 45.7  # the model's scale: the steering gear's rate is Froude-scaled from full scale
 # Steering gear: 2.32 deg/s at full scale (SOLAS: 35 deg one side to 30 deg the other in 28 s),
 # sqrt(45.7) = 6.8 times faster at model scale; the rudder stops at 35 deg

@@ -41,7 +41,7 @@ setup(
         "ros": ROS_WHEELS,
         "test": ["pytest>=7.4,<10", "pytest-xdist>=3.3,<4", "hypothesis>=6.80,<7", "ruff>=0.5,<1",
                  "colcon-common-extensions>=0.3,<1"],
-        "bench": ["sysidentpy>=0.4,<1", "dask[distributed]>=2023.1"],
+        "bench": ["sysidentpy>=0.4,<1", "dask[distributed]>=2023.1", "shipmmg>=0.0.11,<0.1"],
         "fleet": ["dask[distributed]>=2023.1"],
     },
     zip_safe=True,

@@ -5,7 +5,9 @@ with its name, a one-line description, ``run(quick: bool) -> dict`` (a
 JSON-ready result; progress goes to stderr) and ``render(result) -> str``
 (the printed tables). A benchmark that draws figures registers with
 ``plots=True``; its ``run`` then takes ``plot_dir`` (``ship-ident bench NAME
---plot-dir DIR``). ``benchmarks()`` imports every module here, so adding a
+--plot-dir DIR``). A benchmark that can draw its recordings from several generators registers
+them (``generators``); its ``run`` then takes ``generator`` (``--generator NAME``).
+``benchmarks()`` imports every module here, so adding a
 benchmark means adding one module and nothing else.
 """
 
@@ -28,10 +30,12 @@ class Benchmark:
     render: Callable[[dict], str]
     plots: bool = False
     randomised: bool = False
+    generators: tuple[str, ...] = ()  # the recordings' generators ``run`` takes as ``generator`` (the first: default)
 
 
 _REGISTRY: dict[str, Benchmark] = {}
-HELPERS = {"crb", "common", "peer_models", "peer_experiments", "peer_rendering"}  # modules here that are no benchmark
+# modules here that are no benchmark
+HELPERS = {"crb", "common", "mmg", "peer_models", "peer_experiments", "peer_rendering"}
 
 
 def register(
@@ -41,8 +45,9 @@ def register(
     render: Callable[[dict], str],
     plots: bool = False,
     randomised: bool = False,
+    generators: tuple[str, ...] = (),
 ) -> None:
-    _REGISTRY[name] = Benchmark(name, description, run, render, plots, randomised)
+    _REGISTRY[name] = Benchmark(name, description, run, render, plots, randomised, generators)
 
 
 def benchmarks() -> dict[str, Benchmark]:

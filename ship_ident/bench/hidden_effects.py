@@ -16,6 +16,16 @@ and **fixed** when the hidden effect's candidate removes at least half of the he
 true pair removes (the diagnosis adds one effect per round). The share of fair cases also called
 ``missing_effect`` (the candidate significant, not only first) is printed beside it. On the none cases the share of
 ``missing_effect`` verdicts is the false alarm rate. Seeds are drawn fresh each run and printed.
+
+``--generator mmg`` (or ``both``) draws hulls of a physics-based generator instead (``mmg.py``: the
+MMG standard method on hulls varied around KVLCC2), where nothing is hidden by name: the truth is
+an outcome. Each hull is fitted (nomoto2, no effects) on random rudder steps and diagnosed with
+its 10/10 and 20/20 zigzags and 35 deg turning circle held out; every catalogued effect, added
+alone, is a candidate the diagnosis refits and runs free on the held-out manoeuvres. A hull
+**has a halving effect** when some candidate removes at least ``HALVING`` of the held-out heading
+error; on those hulls the diagnosis **succeeds** when its first candidate halves it, the verdict
+is ``missing_effect`` and every parameter of that candidate is determined (none pinned at a bound,
+every standard error below its value: ``diagnose.parameter_warnings``).
 """
 
 from __future__ import annotations
@@ -24,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run, no_worse
+from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run, no_worse, parameter_warnings
 from ..effects import EFFECTS
 from ..simulator import Noise, random_vessel, simulate
 from ..structure import Structure
@@ -37,6 +47,10 @@ MANOEUVRES = ("zigzag10", "zigzag20", "random", "mixed")
 DURATION_S = {"usv": 600.0, "ship": 2400.0}
 SAMPLE_TIME_S = {"usv": 0.1, "ship": 0.5}  # a slow ship's log needs no 10 Hz (KVLCC2 is fitted at 1 s)
 PAIR_SHARE = 0.15  # share of the cases that hide a pair
+GENERATORS = ("ours", "mmg", "both")
+MMG_COUNT, MMG_QUICK_COUNT = 30, 2  # MMG hulls drawn per run
+HALVING = 0.5  # an effect that removes this share of an MMG hull's held-out heading error halves it
+UNSTABLE_TURN_RATE = 0.01  # a pull-out turn rate r' above this: the hull is course-unstable
 
 
 @dataclass(frozen=True)
@@ -155,7 +169,8 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
     return row
 
 
-def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
+def run_ours(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
+    """Cases of our own generator: effects hidden by name on ``simulator.random_vessel``."""
     rng = np.random.default_rng(seed)
     names = list(EFFECTS)
     count = count or (len(names) + 2 if quick else 120)
@@ -208,7 +223,152 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
     }
 
 
+def run_mmg_hull(seed: int) -> dict:
+    """One MMG hull drawn from ``seed`` (``mmg.random_hull``), diagnosed across manoeuvres: the base
+    fit, every candidate's held-out heading error, the verdict and whether the first candidate
+    halves the error with every parameter determined."""
+    from . import mmg
+
+    hull = mmg.random_hull(np.random.default_rng(seed))
+    training, held_out = mmg.hull_recordings(hull, seed)
+    result = diagnose(training, "nomoto2", (), workers=1, validation=held_out)
+    top = result.candidates[0]
+    halving = [c.effect for c in result.candidates if c.improvement_heading >= HALVING]
+    pull_out = mmg.pull_out_turn_rate(hull)
+    undetermined = [w["parameter"] for w in parameter_warnings(top.estimate)] if top.estimate else ["not fitted"]
+    return {
+        "seed": seed,
+        "hull": hull.name,
+        "stability_index": mmg.stability_index(hull),
+        "pull_out_turn_rate": pull_out,
+        "course_unstable": bool(pull_out > UNSTABLE_TURN_RATE),
+        "rmse_heading_deg": float(np.degrees(result.run.fit["rmse_heading"])),
+        "verdict": result.verdict,
+        "top": top.effect,
+        "top_improvement_heading": top.improvement_heading,
+        "top_determined": not undetermined,
+        "top_undetermined": undetermined,
+        "near_equivalent": top.near_equivalent,
+        "candidates": {
+            c.effect: {
+                "improvement_heading": c.improvement_heading,
+                "improvement_yaw_rate": c.improvement_yaw_rate,
+                "rmse_heading_after_deg": float(np.degrees(c.rmse_heading_after)),
+                "significant": c.significant,
+                "t_statistic": c.t_statistic,
+                "training_gain": c.training_gain,
+            }
+            for c in result.candidates
+        },
+        "halving": halving,
+        "first_halves": top.improvement_heading >= HALVING,
+    }
+
+
+def run_mmg(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
+    """Hulls of the MMG generator (``run_mmg_hull``), their seeds drawn from ``seed``."""
+    rng = np.random.default_rng((seed, 1))  # a stream of its own: the ours cases of a seed stay as they were
+    count = count or (MMG_QUICK_COUNT if quick else MMG_COUNT)
+    rows = []
+    for k in range(count):
+        hull_seed = int(rng.integers(2**31))
+        row = run_mmg_hull(hull_seed)
+        progress(
+            f"hidden-effects mmg {k + 1}/{count}: {row['hull']} (seed {hull_seed}, "
+            f"{'course-unstable' if row['course_unstable'] else 'course-stable'}): held-out heading error "
+            f"{row['rmse_heading_deg']:.1f} deg; first {row['top']} "
+            f"{100 * row['top_improvement_heading']:.0f} %"
+            + ("" if row["top_determined"] else f" ({', '.join(row['top_undetermined'])} undetermined)")
+            + f", {row['verdict']}; halving: {', '.join(row['halving']) or 'none'}"
+        )
+        rows.append(row)
+    halved = [r for r in rows if r["halving"]]
+    per_effect = {}
+    for r in rows:
+        for name, c in r["candidates"].items():
+            entry = per_effect.setdefault(name, {"halves": 0, "first": 0, "best": 0})
+            entry["halves"] += c["improvement_heading"] >= HALVING
+        per_effect[r["top"]]["first"] += 1
+        best = max(r["candidates"], key=lambda n: r["candidates"][n]["improvement_heading"])
+        per_effect[best]["best"] += 1
+
+    def share(flags):
+        return float(np.mean(flags)) if flags else float("nan")
+
+    return {
+        "seed": seed,
+        "hulls": len(rows),
+        "course_unstable": sum(r["course_unstable"] for r in rows),
+        "with_halving_effect": len(halved),
+        "first_halves": share([r["first_halves"] for r in halved]),
+        "missing_effect": share([r["verdict"] == "missing_effect" for r in halved]),
+        "determined": share([r["top_determined"] for r in halved]),
+        "succeeded": share(
+            [r["first_halves"] and r["verdict"] == "missing_effect" and r["top_determined"] for r in halved]
+        ),
+        "missing_effect_without_halving": share([r["verdict"] == "missing_effect" for r in rows if not r["halving"]]),
+        "per_effect": per_effect,
+        "rows": rows,
+    }
+
+
+def run(quick: bool = False, seed: int = 0, count: int | None = None, generator: str = "ours") -> dict:
+    """The cases of ``generator``: ``ours`` (effects hidden by name), ``mmg`` (MMG hulls) or ``both``."""
+    if generator not in GENERATORS:
+        raise ValueError(f"unknown generator {generator!r}; choose from {', '.join(GENERATORS)}")
+    result = {"generator": generator}
+    if generator in ("ours", "both"):
+        result.update(run_ours(quick, seed, count))
+    if generator in ("mmg", "both"):
+        result["mmg"] = run_mmg(quick, seed, count)
+    return result
+
+
+def render_mmg(result: dict) -> str:
+    """The MMG generator's figures: hulls, halving effects, how often the first candidate halves it."""
+    rows = [
+        [name, e["halves"], e["best"], e["first"]]
+        for name, e in sorted(result["per_effect"].items(), key=lambda kv: (-kv[1]["halves"], kv[0]))
+    ]
+    halved = result["with_halving_effect"]
+    text = table(
+        ["effect", "halves the error on", "removes most on", "first candidate on"],
+        rows,
+        f"hidden-effects, MMG generator, seed {result['seed']}: {result['hulls']} hulls "
+        f"({result['course_unstable']} course-unstable), {halved} with an effect that halves the "
+        "held-out heading error (hulls per effect)",
+    )
+    lines = [
+        text,
+        "",
+        f"first candidate halves it: {100 * result['first_halves']:.0f} % of {halved} hulls; verdict missing_effect: "
+        f"{100 * result['missing_effect']:.0f} %; every parameter of the first determined: "
+        f"{100 * result['determined']:.0f} %; first halves it, missing_effect and every parameter determined: "
+        f"{100 * result['succeeded']:.0f} %",
+        f"hulls without a halving effect called missing_effect: {100 * result['missing_effect_without_halving']:.0f} %",
+        "hulls (replay one with run_mmg_hull(seed)):",
+    ]
+    lines += [
+        f"  seed {r['seed']} {r['hull']}: C' {r['stability_index']:+.4f}, pull-out r' {r['pull_out_turn_rate']:.3f}, "
+        f"held-out heading error {r['rmse_heading_deg']:.1f} deg, first {r['top']} "
+        f"{100 * r['top_improvement_heading']:.0f} %"
+        + ("" if r["top_determined"] else f" ({', '.join(r['top_undetermined'])} undetermined)")
+        + f", {r['verdict']}; halving: {', '.join(r['halving']) or 'none'}"
+        for r in result["rows"]
+    ]
+    return "\n".join(lines)
+
+
 def render(result: dict) -> str:
+    parts = []
+    if "cases" in result:
+        parts.append(render_ours(result))
+    if "mmg" in result:
+        parts.append(render_mmg(result["mmg"]))
+    return "\n\n".join(parts)
+
+
+def render_ours(result: dict) -> str:
     rows = [
         [name, e["fair"], f"{100 * e['named_first'] / e['fair']:.0f} %", f"{100 * e['fixed'] / e['fair']:.0f} %"]
         for name, e in sorted(result["per_effect"].items())
@@ -232,8 +392,9 @@ def render(result: dict) -> str:
 
 register(
     "hidden-effects",
-    "does diagnose name and fix a hidden effect on random vessels? (randomised)",
+    "does diagnose name and fix a hidden effect on random vessels, or on MMG hulls (--generator)? (randomised)",
     run,
     render,
     randomised=True,
+    generators=GENERATORS,
 )

@@ -41,6 +41,18 @@ Figures, all against the simulated truth:
 
 The JSON carries each case's refits in short (``_brief``): a rejected refit is found there with
 its conditions and window bound, and replayed by the case's seed.
+
+``--generator mmg`` replays hulls of the physics-based generator instead (``mmg.py``: the MMG
+standard method on hulls varied around KVLCC2's 7 m model), steady, on random rudder steps
+(each angle within +-35 deg held 10-40 s) for five windows, with the configuration of a ship
+whose T1 is that of an offline fit (the node's model and method) of the hull's own 600 s of
+steps. They have no Nomoto truth, so only what needs none is judged (``summarise_mmg``): the
+share of refits that publish a new OK estimate and the conditions of the others, false
+``vessel_changed`` per hour (the hull never changes), and whether the published estimates (OK or
+with a warning) agree with each other within their errors: the share whose 95 % interval holds
+the median of the hull's published values, per parameter (an estimator whose windows
+scatter more than it says, or a model whose parameters follow the window's turn rates, falls
+short of 0.95).
 """
 
 from __future__ import annotations
@@ -86,7 +98,9 @@ WELL_EXCITED_PROFILE_RISE = 3.84
 QUICK_HULL_T1 = 12.0  # s: the recovery target (60 s median) is set for hulls up to this T1
 MAX_SCALE = 10.0  # a ship's window is at most 10 node windows (1800 s)
 DEFAULT_COUNT, QUICK_COUNT = 60, 6
+MMG_COUNT, MMG_QUICK_COUNT = 10, 2
 WORKERS = 2
+GENERATORS = ("ours", "mmg")
 
 
 def config_for(vessel) -> OnlineConfig:
@@ -96,7 +110,12 @@ def config_for(vessel) -> OnlineConfig:
     1 s; gap threshold five sample times)."""
     if not vessel.name.startswith("ship"):
         return DEFAULTS
-    scale = float(np.clip(30.0 * vessel.parameters["T1"] / DEFAULTS.window_length, 1.0, MAX_SCALE))
+    return config_for_time_constant(vessel.parameters["T1"])
+
+
+def config_for_time_constant(t1: float) -> OnlineConfig:
+    """A ship's configuration (``config_for``) for a hull with the time constant ``t1`` (s)."""
+    scale = float(np.clip(30.0 * t1 / DEFAULTS.window_length, 1.0, MAX_SCALE))
     sample_time = min(1.0, round(DEFAULTS.sample_time * scale, 2))
     return DEFAULTS.changed(
         window_length=DEFAULTS.window_length * scale,
@@ -421,9 +440,134 @@ def case_line(case: dict) -> str:
     return text
 
 
+def run_mmg_case(seed: int, quick: bool = False) -> dict:
+    """An MMG hull drawn from ``seed`` on random rudder steps, replayed through the online core with
+    a ship's configuration for the T1 of an offline fit of its first 600 s (plain data)."""
+    from . import mmg
+
+    hull = mmg.random_hull(np.random.default_rng(seed))
+    first = mmg.simulate(hull, "steps", seed).dataset
+    offline = make_estimator(DEFAULTS.method).fit(DEFAULTS.structure(), first)
+    config = config_for_time_constant(offline.parameters["T1"])
+    duration = config.window_length * (3.0 if quick else WINDOWS_PER_RUN)
+    dataset = mmg.simulate(hull, "steps", seed, duration=duration).dataset
+    refits = []
+    for record in run_schedule(OnlineIdentifier(config), dataset_samples(dataset)):
+        if "window_filling" in record.conditions or "no_data" in record.conditions:
+            continue
+        data = record.to_json()
+        refits.append(
+            {
+                "time": record.time,
+                "status": data["status"],
+                "new": data["new_estimate"],
+                "conditions": sorted(data["conditions"]),
+                "parameters": data["parameters"],
+                "std_errors": data["std_errors"],
+            }
+        )
+    return {
+        "seed": seed,
+        "vessel": hull.name,
+        "offline_T1": float(offline.parameters["T1"]),
+        "duration": duration,
+        "window_s": config.window_length,
+        "refits": refits,
+    }
+
+
+def summarise_mmg(cases: list[dict]) -> dict:
+    """The figures of MMG hulls, which need no truth (see the module docstring): published means a
+    new estimate, OK or with a warning (an uncertain one is published with its errors)."""
+    refits = published_ok = published_any = changed = 0
+    hours = 0.0
+    reasons: dict[str, int] = {}
+    covered = {p: [] for p in PARAMETERS}
+    for case in cases:
+        published = [r for r in case["refits"] if r["new"] and r["parameters"]]
+        refits += len(case["refits"])
+        published_any += len(published)
+        published_ok += sum(r["status"] == "OK" for r in published)
+        for r in case["refits"]:
+            if not (r["new"] and r["status"] == "OK"):
+                for c in r["conditions"] or ["new estimate not OK"]:
+                    reasons[c] = reasons.get(c, 0) + 1
+        if case["refits"]:
+            hours += (case["refits"][-1]["time"] - case["refits"][0]["time"]) / 3600.0
+            changed += _changes_declared(case["refits"])
+        for p in PARAMETERS:
+            median = float(np.median([r["parameters"][p] for r in published])) if published else math.nan
+            covered[p] += [
+                abs(r["parameters"][p] - median) <= 1.96 * r["std_errors"].get(p, math.nan) for r in published
+            ]
+    return {
+        "cases": len(cases),
+        "refits": refits,
+        "published_ok": published_ok,
+        "published": published_any,
+        "share_published_ok": published_ok / refits if refits else math.nan,
+        "reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
+        "false_changes_per_hour": changed / hours if hours else math.nan,
+        "hours": hours,
+        "median_coverage": {p: _share(v) for p, v in covered.items()},
+    }
+
+
+def mmg_case_line(case: dict) -> str:
+    """One line per MMG hull: seed, hull, offline T1, window, refits OK, changes declared."""
+    ok = sum(r["new"] and r["status"] == "OK" for r in case["refits"])
+    return (
+        f"seed {case['seed']} {case['vessel']} offline T1 {case['offline_T1']:.1f} s window "
+        f"{case['window_s']:.0f} s: {ok}/{len(case['refits'])} refits OK, "
+        f"{_changes_declared(case['refits'])} vessel_changed declared"
+    )
+
+
+def run_mmg(quick: bool, seed: int, count: int | None, workers: int) -> dict:
+    """Hulls of the MMG generator (``run_mmg_case``): hull i of seed S from seed S + i alone."""
+    count = count or (MMG_QUICK_COUNT if quick else MMG_COUNT)
+    seeds = [seed + i for i in range(count)]
+    cases = []
+    with ProcessPoolExecutor(max_workers=max(1, min(workers, count))) as pool:
+        for i, case in enumerate(pool.map(run_mmg_case, seeds, [quick] * count)):
+            progress(f"vessels mmg {i + 1}/{count}: {mmg_case_line(case)}")
+            cases.append(case)
+    return {"summary": summarise_mmg(cases), "cases": [dict(c, line=mmg_case_line(c)) for c in cases]}
+
+
+def render_mmg(result: dict) -> str:
+    s = result["summary"]
+    lines = [
+        f"vessels, MMG generator: {s['cases']} steady hulls, seed {result.get('seed')}; hull i replays "
+        "with --seed (seed + i) --count 1"
+    ]
+    lines += [c["line"] for c in result["cases"]]
+    lines.append(
+        table(
+            ["parameter", "95 % interval holds the hull's median"],
+            [[p, v] for p, v in s["median_coverage"].items()],
+            f"published OK estimates: {s['published_ok']} of {s['refits']} refits "
+            f"({100 * s['share_published_ok']:.0f} %); the others: "
+            + (", ".join(f"{c} {n}" for c, n in s["reasons"].items()) or "-")
+            + f"; over the {s['published']} estimates published (OK or with a warning):",
+        )
+    )
+    lines.append(f"false vessel_changed: {s['false_changes_per_hour']:.2f} per hour over {s['hours']:.1f} h (target 0)")
+    return "\n\n".join(lines)
+
+
 def run(
-    quick: bool = False, seed: int = 0, count: int | None = None, plot_dir: str | None = None, workers: int = WORKERS
+    quick: bool = False,
+    seed: int = 0,
+    count: int | None = None,
+    plot_dir: str | None = None,
+    workers: int = WORKERS,
+    generator: str = "ours",
 ) -> dict:
+    if generator not in GENERATORS:
+        raise ValueError(f"unknown generator {generator!r}; choose from {', '.join(GENERATORS)}")
+    if generator == "mmg":
+        return dict(run_mmg(quick, seed, count, workers), generator=generator)
     count = count or (QUICK_COUNT if quick else DEFAULT_COUNT)
     seeds = [seed + i for i in range(count)]
     cases = []
@@ -501,6 +645,8 @@ def plot(cases: list[dict], plot_dir: str) -> list[str]:
 
 
 def render(result: dict) -> str:
+    if result.get("generator") == "mmg":
+        return render_mmg(result)
     s = result["summary"]
     lines = [
         f"vessels: {s['cases']} cases ({s['steady_cases']} steady, {s['step_cases']} with K -30 %, "
@@ -566,4 +712,5 @@ register(
     render,
     plots=True,
     randomised=True,
+    generators=GENERATORS,
 )

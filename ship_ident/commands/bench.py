@@ -28,6 +28,13 @@ def add_parser(subparsers) -> None:
     parser.add_argument(
         "--count", type=int, metavar="N", help="randomised benchmarks: how many vessels or cases to draw"
     )
+    parser.add_argument(
+        "--generator",
+        metavar="NAME",
+        help="benchmarks with several generators of recordings: "
+        + "; ".join(f"{b.name}: {', '.join(b.generators)}" for b in available.values() if b.generators)
+        + " (default: the first)",
+    )
     parser.set_defaults(func=run)
 
 
@@ -37,6 +44,14 @@ def run(args) -> int:
 
     benchmark = benchmarks()[args.name]
     options = {}
+    if args.generator is not None:
+        if not benchmark.generators:
+            raise CommandError(f"{benchmark.name} draws from one generator: --generator does not apply")
+        if args.generator not in benchmark.generators:
+            raise CommandError(
+                f"{benchmark.name} has no generator {args.generator!r}; choose from {', '.join(benchmark.generators)}"
+            )
+        options["generator"] = args.generator
     if benchmark.plots and args.plot_dir:
         options["plot_dir"] = args.plot_dir
     if benchmark.randomised:

@@ -1,0 +1,108 @@
+"""The MMG generator (``ship_ident.bench.mmg``): KVLCC2 as published, and ``bench hidden-effects
+--generator mmg`` end to end on one hull."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("shipmmg")
+
+from ship_ident.bench import mmg  # noqa: E402
+from ship_ident.bench.hidden_effects import render, run  # noqa: E402
+from ship_ident.cli import main  # noqa: E402
+from ship_ident.effects import EFFECTS  # noqa: E402
+
+# KVLCC2's free-running model tests at MARIN for SIMMAN 2008 (Stern et al., "Experience from
+# SIMMAN 2008", J. Ship Research 55(2), 2011), read off the runs to both sides (port first,
+# starboard first): 35 deg turning circles, advance 3.02-3.09 L and tactical diameter 3.07-3.33 L;
+# 10/10 zigzags, first overshoot 8.1-9.3 deg, second 15.2-22.0 deg; 20/20 zigzags, first
+# overshoot 12.6-15.7 deg, second 12.7-16.0 deg.
+MARIN_ADVANCE_L = (3.02, 3.09)
+MARIN_TACTICAL_DIAMETER_L = (3.07, 3.33)
+MARIN_OVERSHOOTS_DEG = {"zigzag10": ((8.1, 9.3), (15.2, 22.0)), "zigzag20": ((12.6, 15.7), (12.7, 16.0))}
+
+
+@pytest.fixture(scope="module")
+def kvlcc2():
+    return mmg.kvlcc2_hull()
+
+
+def test_kvlcc2_is_course_unstable(kvlcc2):
+    """The bare hull's linear stability criterion is negative (measured -0.0127), and after a pull-out
+    to port the ship keeps turning (r' 0.124 after 300 s; to starboard the turn dies out: the flow
+    straightening gamma_R differs to each side, so the instability loop is not symmetric)."""
+    assert mmg.stability_index(kvlcc2) == pytest.approx(-0.0127, abs=5e-4)
+    assert mmg.pull_out_turn_rate(kvlcc2) > 0.1
+
+
+def test_starboard_rudder_turns_to_starboard_in_ned(kvlcc2):
+    """Positive rudder gives a positive yaw rate, a growing heading and a track to starboard (east
+    from a northbound approach): the project's conventions, no sign converted."""
+    run = mmg.simulate(kvlcc2, "turning35", seed=1)
+    assert run.rudder.max() == pytest.approx(np.radians(35.0), abs=np.radians(0.1))
+    assert run.r[-1] > 0.0 and run.psi[-1] > 2 * np.pi and run.y[-1] > 0.0
+    assert run.dataset.speed[-1] < 0.5 * kvlcc2.speed  # the speed lost in the turn (measured: to 33 %)
+
+
+def test_kvlcc2_turning_circle_and_zigzags_against_marin(kvlcc2):
+    """The 35 deg turning circle lies within 5 % of MARIN's (measured: advance 3.10 L, tactical
+    diameter 3.08 L); the zigzags' overshoots as simulated (first, second: 10/10 4.9 and 13.2 deg,
+    20/20 10.5 and 15.3 deg) against MARIN's: 20/20 within 25 % of the measured range; on 10/10 the
+    MMG coefficients in shipmmg's model swing less than the model did (first overshoot 4.9 against
+    8.1-9.3 deg), within half to all of it."""
+    advance, tactical = mmg.advance_and_tactical_diameter(mmg.simulate(kvlcc2, "turning35", seed=1))
+    length = kvlcc2.basic.L_pp
+    assert 0.95 * MARIN_ADVANCE_L[0] <= advance / length <= 1.05 * MARIN_ADVANCE_L[1]
+    assert 0.95 * MARIN_TACTICAL_DIAMETER_L[0] <= tactical / length <= 1.05 * MARIN_TACTICAL_DIAMETER_L[1]
+    measured = {}
+    for manoeuvre in MARIN_OVERSHOOTS_DEG:
+        angle = np.radians(float(manoeuvre[len("zigzag") :]))
+        measured[manoeuvre] = np.degrees(mmg.overshoots(mmg.simulate(kvlcc2, manoeuvre, seed=1), angle))[:2]
+    assert measured["zigzag10"] == pytest.approx([4.9, 13.2], abs=0.3)
+    assert measured["zigzag20"] == pytest.approx([10.5, 15.3], abs=0.3)
+    for simulated, (low, high) in zip(measured["zigzag20"], MARIN_OVERSHOOTS_DEG["zigzag20"]):
+        assert 0.75 * low <= simulated <= 1.25 * high
+    for simulated, (low, high) in zip(measured["zigzag10"], MARIN_OVERSHOOTS_DEG["zigzag10"]):
+        assert 0.5 * low <= simulated <= high
+
+
+def test_recordings_are_the_projects_datasets(kvlcc2):
+    """Training: random rudder steps, 600 s at 10 Hz with speed; held out: three manoeuvres joined,
+    each its own segment; noise at ``simulator.Noise``'s levels."""
+    training, held_out = mmg.hull_recordings(kvlcc2, seed=3)
+    assert training.n_samples == 6001 and training.sample_time == pytest.approx(0.1)
+    assert training.speed is not None and np.ptp(training.speed) > 0.3 * kvlcc2.speed
+    assert [r["name"] for r in held_out.meta["recordings"]] == list(mmg.HELD_OUT)
+    assert len(held_out.segments) == 3
+    assert np.degrees(training.noise_std("yaw_rate")) == pytest.approx(0.2, rel=0.25)
+    assert np.degrees(np.abs(training.rudder).max()) <= 35.5
+
+
+def test_random_hulls_vary_around_kvlcc2():
+    """Every factor within its range; the hull's name carries them."""
+    hull = mmg.random_hull(np.random.default_rng(4))
+    for name, (low, high) in mmg.VARIATION.items():
+        assert low <= hull.variation[name] <= high
+        assert f"{name}=" in hull.name
+    assert hull.speed == pytest.approx(mmg.KVLCC2_SPEED * hull.variation["speed"])
+
+
+@pytest.mark.slow
+def test_bench_hidden_effects_mmg_runs_end_to_end():
+    """One hull diagnosed across manoeuvres: every catalogued effect a candidate, figures rendered."""
+    result = run(seed=7, count=1, generator="mmg")
+    row = result["mmg"]["rows"][0]
+    print(row)
+    assert set(row["candidates"]) == set(EFFECTS)
+    assert np.isfinite(row["rmse_heading_deg"]) and row["rmse_heading_deg"] > 1.0
+    assert row["halving"] == [n for n, c in row["candidates"].items() if c["improvement_heading"] >= 0.5]
+    text = render(result)
+    assert "MMG generator, seed 7: 1 hulls" in text and f"seed {row['seed']}" in text
+
+
+def test_generator_applies_only_where_a_benchmark_has_several(capsys):
+    assert main(["bench", "speed", "--generator", "mmg"]) == 2
+    assert "--generator does not apply" in capsys.readouterr().err
+    assert main(["bench", "hidden-effects", "--generator", "other"]) == 2
+    assert "choose from ours, mmg, both" in capsys.readouterr().err

@@ -90,13 +90,13 @@ T_UPPER_BOUND = 1e3  # s, the base models' upper bound on T and T1 (structure.BA
 
 def yaw_time_constant(params: dict) -> float:
     """The hull's dominant yaw time constant (s) in either form: T, T1 + T2, or the slow pole's
-    time of the acceleration form (1 / |a1|, c1 / |a1|), at most ``T_UPPER_BOUND``."""
+    time of the acceleration form (1 / |a1|), at most ``T_UPPER_BOUND``."""
     if "T" in params:
         return float(params["T"])
     if "T1" in params:
         return float(params["T1"] + params.get("T2", 0.0))
     if "a1" in params:
-        slow = params.get("c1", 1.0) / max(abs(params["a1"]), 1e-12)
+        slow = 1.0 / max(abs(params["a1"]), 1e-12)
         return float(min(slow, T_UPPER_BOUND))
     return 1.0
 
@@ -445,7 +445,7 @@ class CourseInstability(Effect):
     parameters = (
         Parameter(
             "a3",
-            "s/rad^2 (nomoto1), 1/rad^2 (nomoto2)",
+            "s/rad^2",
             "cubic yaw damping per unit yaw inertia that bounds the unstable turn",
             0.0,
             0.0,
@@ -503,7 +503,7 @@ class QuadraticYaw(Effect):
     parameters = (
         Parameter(
             "d_q",
-            "1/rad (nomoto1), 1/(rad s) (nomoto2)",
+            "1/rad",
             "quadratic yaw damping per unit yaw inertia: forcing -d_q r|r|",
             0.0,
             -1e4,

@@ -119,7 +119,7 @@ FULL_WINDOW_MARGIN = 3.0
 # published as uncertain_estimate (WARN), and after a change not at all if its K is known worse than
 # the last good estimate's. In the acceleration form (a hull whose linear yaw damping is weak or
 # negative) the rudder's yaw acceleration b (b0) stands for K and the dampings for the time constants.
-TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04, "b": 0.03, "b0": 0.03, "c1": 0.04, "a1": 0.1}
+TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04, "b": 0.03, "b0": 0.03, "a1": 0.1}
 # Shares of T1 above the estimate at which T2 is held to profile the cost along the T2 = T3 valley
 # (``first_order_valley``): a second pole the window cannot tell from zero may lie far beyond its 95 % end.
 VALLEY_RUNGS = (0.1, 0.2, 0.35, 0.5)

@@ -17,17 +17,19 @@ The Nomoto form divides the yaw equation by its linear damping. Where that
 damping is weak (a USV in fast turns, held by quadratic drag) or negative (a
 course-unstable ship, held by its cubic damping), K and the time constants
 run off to infinity while the data still determine the equation divided by
-the yaw inertia instead. A structure with an effect that frees the linear
+the coefficient of r' instead (the yaw inertia of a first-order hull, T1 + T2
+of a second-order one: dividing by T1 T2 would spread a loosely known fast
+pole over every parameter). A structure with an effect that frees the linear
 damping (``Effect.frees_linear_damping``) is therefore fitted in that
-*acceleration form* (Norrbin's form, per unit yaw inertia):
+*acceleration form* (Norrbin's form):
 
-    nomoto1:  r'  = b delta - a1 r + G
-    nomoto2:  r'' = -c1 r' - a1 r + b0 delta + b1 delta' + G
+    nomoto1:  r' = b delta - a1 r + G
+    nomoto2:  r' = -m2 r'' - a1 r + b0 delta + b1 delta' + G
 
-with a1 of either sign and G the effects' forcing per unit inertia. Where
+with a1 of either sign and G the effects' forcing in the same units. Where
 a1 > 0 it is the Nomoto model: K = b / a1, T = 1 / a1 (first order);
-K = b0 / a1, T1 T2 = 1 / a1, T1 + T2 = c1 / a1, T3 = b1 / b0 (second order),
-published beside the fitted parameters (``Structure.nomoto_parameters``).
+K = b0 / a1, T1 + T2 = 1 / a1, T1 T2 = m2 / a1, T3 = b1 / b0 (second order),
+published beside the fitted parameters (``nomoto_parameters``).
 """
 
 from __future__ import annotations
@@ -53,8 +55,8 @@ BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
     ),
 }
 # The acceleration form's base parameters (see the module docstring): rudder gains and dampings per
-# unit yaw inertia. The rudder's yaw acceleration is positive (K > 0), the damping of r' (c1, the
-# sum of the poles) too; the linear damping a1 may take either sign.
+# unit of r's coefficient. The rudder's yaw acceleration is positive (K > 0), the fast pole's time m2
+# too; the linear damping a1 may take either sign.
 ACCELERATION_MODELS: dict[str, tuple[Parameter, ...]] = {
     "nomoto1": (
         Parameter("b", "1/s^2", "rudder's yaw acceleration per rudder angle (K / T)", 0.1, 1e-8, 1e3),
@@ -63,21 +65,14 @@ ACCELERATION_MODELS: dict[str, tuple[Parameter, ...]] = {
         ),
     ),
     "nomoto2": (
-        Parameter("b0", "1/s^3", "rudder's yaw jerk per rudder angle (K / (T1 T2))", 0.1, 1e-8, 1e4),
-        Parameter("b1", "1/s^2", "rudder's yaw acceleration per rudder rate (K T3 / (T1 T2))", 0.0, 0.0, 1e4),
-        Parameter("c1", "1/s", "damping of the yaw acceleration ((T1 + T2) / (T1 T2))", 1.0, 1e-4, 1e3),
-        Parameter(
-            "a1",
-            "1/s^2",
-            "linear yaw damping per unit yaw inertia (1 / (T1 T2); below 0: course-unstable)",
-            0.05,
-            -100.0,
-            1e4,
-        ),
+        Parameter("b0", "1/s^2", "rudder's yaw acceleration per rudder angle (K / (T1 + T2))", 0.1, 1e-8, 1e3),
+        Parameter("b1", "1/s", "rudder's yaw acceleration per rudder rate (K T3 / (T1 + T2))", 0.0, 0.0, 1e3),
+        Parameter("m2", "s", "fast pole's time (T1 T2 / (T1 + T2))", 0.1, 1e-3, 1e3),
+        Parameter("a1", "1/s", "linear yaw damping (1 / (T1 + T2); below 0: course-unstable)", 0.05, -10.0, 100.0),
     ),
 }
 NOMOTO_NAMES = ("K", "T", "T1", "T2", "T3")
-ACCELERATION_NAMES = ("b", "b0", "b1", "c1", "a1")
+ACCELERATION_NAMES = ("b", "b0", "b1", "m2", "a1")
 NOMOTO_TIME_CONSTANT_LIMIT = 1e3  # s, T and T1's upper bound: a slower hull is published without them
 
 
@@ -155,14 +150,14 @@ class Structure:
         if self.form == "acceleration" and "a1" not in params:
             for name in NOMOTO_NAMES:
                 out.pop(name, None)
-            inertia = params["T"] if self.order == 1 else params["T1"] * params["T2"]
+            inertia = params["T"] if self.order == 1 else params["T1"] + params["T2"]
             if self.order == 1:
                 out.update(b=params["K"] / inertia, a1=1.0 / inertia)
             else:
                 out.update(
                     b0=params["K"] / inertia,
                     b1=params["K"] * params["T3"] / inertia,
-                    c1=(params["T1"] + params["T2"]) / inertia,
+                    m2=params["T1"] * params["T2"] / inertia,
                     a1=1.0 / inertia,
                 )
             scale = 1.0 / inertia
@@ -262,9 +257,9 @@ class Structure:
         """The integrator's constants (K, T1, T2, T3) and forcing terms for ``params``.
 
         The integrator solves the Nomoto form. The acceleration form multiplied by a positive
-        inertia m is that form with K = m b0, T1 T2 = m, T1 + T2 = m c1 (T1 = T2 = 2 / c1:
-        m = 4 / c1^2) and T3 = b1 / b0 (first order: T = m = 1 / max(|a1|, 1e-3 1/s), K = m b), its
-        linear damping moved to the forcing as (1 - m a1) r and the effects' forcing times m."""
+        number m is that form with K = m b0, T1 + T2 = m, T1 T2 = m m2 (T1 = T2 = 2 m2: m = 4 m2)
+        and T3 = b1 / b0 (first order: T = m = 1 / max(|a1|, 1e-3 1/s), K = m b), its linear damping
+        moved to the forcing as (1 - m a1) r and the effects' forcing times m."""
         terms = [t for e in self.effects for t in e.forcing_terms(params)]
         if self.form == "nomoto":
             if self.order == 1:
@@ -274,8 +269,8 @@ class Structure:
             inertia = 1.0 / max(abs(params["a1"]), 1e-3)
             constants = (inertia * params["b"], inertia, 0.0, 0.0)
         else:
-            inertia = 4.0 / params["c1"] ** 2
-            constants = (inertia * params["b0"], 2.0 / params["c1"], 2.0 / params["c1"], params["b1"] / params["b0"])
+            inertia = 4.0 * params["m2"]
+            constants = (inertia * params["b0"], 2.0 * params["m2"], 2.0 * params["m2"], params["b1"] / params["b0"])
         scaled = [replace(t, coefficient=inertia * t.coefficient) for t in terms]
         return constants, [ForcingTerm(1.0 - inertia * params["a1"], r_power=1), *scaled]
 
@@ -318,9 +313,9 @@ class Structure:
         s = signals
         scale_k = s.base_column_scales.get("K", 1.0)
         scale_t = s.base_column_scales.get("T", 1.0)
-        if self.form == "acceleration":  # the highest derivative on the left (speed scales left to the search)
-            y = s.r_dot if self.order == 1 else s.r_ddot
-            cols = {"r": s.r, "delta": s.delta} if self.order == 1 else {"r'": s.r_dot, "r": s.r, "delta": s.delta}
+        if self.form == "acceleration":  # r' on the left (speed scales left to the search)
+            y = s.r_dot
+            cols = {"r": s.r, "delta": s.delta} if self.order == 1 else {"r''": s.r_ddot, "r": s.r, "delta": s.delta}
             if self.order == 2:
                 cols["delta'"] = s.delta_dot
         elif self.order == 1:
@@ -349,7 +344,7 @@ class Structure:
             if self.order == 1:
                 base = {"b": c["delta"], "a1": -c["r"]}
             else:
-                base = {"b0": c["delta"], "b1": c["delta'"], "c1": -c["r'"], "a1": -c["r"]}
+                base = {"b0": c["delta"], "b1": c["delta'"], "m2": -c["r''"], "a1": -c["r"]}
             base["K"] = c["delta"]  # the effects' rudder-side terms are relative to the rudder's coefficient
         elif self.order == 1:
             base["T"] = -c["r'"]
@@ -387,26 +382,26 @@ class Structure:
 
 def fastest_time_constant(params: dict) -> float:
     """The fastest time scale (s) of a base model's parameters in either form: the smallest of T, T1
-    and T2 given, or the fast pole's time of the acceleration form (1 / |a1|; 1 / max(c1, sqrt|a1|))."""
+    and T2 given, or the fast pole's time of the acceleration form (1 / |a1|; min(m2, sqrt(m2 / |a1|)))."""
     nomoto = [params[n] for n in ("T", "T1", "T2") if n in params]
     if nomoto:
         return float(min(nomoto))
-    if "c1" in params:
-        return float(1.0 / max(params["c1"], np.sqrt(abs(params["a1"])), 1e-3))
+    if "m2" in params:
+        return float(max(min(params["m2"], np.sqrt(params["m2"] / max(abs(params["a1"]), 1e-12))), 1e-3))
     return float(1.0 / max(abs(params["a1"]), 1e-3))
 
 
 def nomoto_parameters(params: dict) -> dict:
     """K and the time constants (1/s, s) of an acceleration-form parameter set, where they exist:
     a positive linear damping a1 (first order: K = b / a1, T = 1 / a1), and real time constants
-    (second order: T1, T2 the roots of x^2 - (c1 / a1) x + 1 / a1, T3 = b1 / b0), with T (T1) below
+    (second order: T1, T2 the roots of x^2 - x / a1 + m2 / a1, T3 = b1 / b0), with T (T1) below
     ``NOMOTO_TIME_CONSTANT_LIMIT``; {} otherwise (a course-unstable hull has no K)."""
     a1 = params["a1"]
     if not a1 * NOMOTO_TIME_CONSTANT_LIMIT > 1.0:
         return {}
     if "b" in params:
         return {"K": params["b"] / a1, "T": 1.0 / a1}
-    total, product = params["c1"] / a1, 1.0 / a1
+    total, product = 1.0 / a1, params["m2"] / a1
     disc = total * total - 4.0 * product
     if disc < 0:
         return {}

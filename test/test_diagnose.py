@@ -275,7 +275,7 @@ def _course_unstable_seed001() -> dict:
     own, held by a cubic damping at 0.4 R0."""
     stable = Structure("nomoto2", ("course_instability",)).in_form(VESSELS["seed001"].parameters)
     return dict(
-        {k: stable[k] for k in ("b0", "b1", "c1")}, a1=-0.3 * stable["a1"], a3=0.3 * stable["a1"] / (0.4 * R0) ** 2
+        {k: stable[k] for k in ("b0", "b1", "m2")}, a1=-0.3 * stable["a1"], a3=0.3 * stable["a1"] / (0.4 * R0) ** 2
     )
 
 
@@ -309,7 +309,7 @@ def test_effects_real_hulls_need_are_named_first_with_their_parameters(effect):
 @pytest.mark.parametrize("model", ["nomoto1", "nomoto2"])
 def test_the_acceleration_form_of_a_course_stable_hull_is_its_nomoto_model(model):
     """A hull with a positive linear damping and no nonlinear one, written per unit yaw inertia
-    (b, a1 or b0, b1, c1, a1), free-runs exactly as its Nomoto model, and gives back K and the time
+    (b, a1 or b0, b1, m2, a1), free-runs exactly as its Nomoto model, and gives back K and the time
     constants (``nomoto_parameters``)."""
     data = simulate("zigzag10", duration=300.0, seed=3).dataset
     base = {"K": 0.2, "T": 8.0} if model == "nomoto1" else {"K": 0.2, "T1": 8.0, "T2": 0.6, "T3": 1.2}

@@ -18,8 +18,15 @@ from ship_ident.structure import Structure
 KVLCC2 = Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2_marin"
 
 # A small USV seen through a yaw-only model: sway coupling makes its linear yaw damping negative
-# (a1 < 0), a quadratic cross-flow damping holds its turns (r'' = -c1 r' - a1 r - d_q r|r| + b0 d + b1 d')
-USV_HELD_BY_QUADRATIC_DRAG = {"b0": 14.2, "b1": 5.0, "c1": 16.3, "a1": -6.8, "d_q": 95.0}
+# (a1 < 0), a quadratic cross-flow damping holds its turns: r' = -m2 r'' - a1 r - d_q r|r| + b0 d + b1 d'
+# (r'' + 16.3 r' - 6.8 r + 95 r|r| = 14.2 d + 5.0 d', divided by 16.3)
+USV_HELD_BY_QUADRATIC_DRAG = {
+    "b0": 14.2 / 16.3,
+    "b1": 5.0 / 16.3,
+    "m2": 1 / 16.3,
+    "a1": -6.8 / 16.3,
+    "d_q": 95.0 / 16.3,
+}
 
 
 def _usv(maneuver: str, duration: float, seed: int):

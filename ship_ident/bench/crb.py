@@ -39,7 +39,7 @@ from ..innovations import innovation_filter, noise_model, spectral_fisher_inform
 from ..structure import Structure
 
 # the parameters the linearised noise model depends on (either form)
-NOISE_SHAPING = ("K", "T", "T1", "T2", "T3", "b", "b0", "b1", "c1", "a1")
+NOISE_SHAPING = ("K", "T", "T1", "T2", "T3", "b", "b0", "b1", "m2", "a1")
 
 
 def output_sensitivities(

@@ -5,9 +5,10 @@ manoeuvre, and hides one effect of the catalogue, none, or a pair, at a strength
 (``strength``, scaled by how the vessel answers that manoeuvre, ``response``: e.g. a delay of
 20-50 % of T1, yaw damping that takes 30-80 % off the turn rate it reaches, a rudder moment
 20-35 % short at the rudder it uses). A case
-is **fair** when an output-error fit of the true structure (started, as a candidate, from the
-diagnosed model with the effects neutral and from the effects' own starts) removes at least ``FAIR_SHARE`` of
-the held-out free-run error (the diagnosis's own windows): only fair cases are counted.
+is **fair** when the true model at its known parameters, run free on the held-out part (the
+diagnosis's own windows), has at most 1 - ``FAIR_SHARE`` of the base model fit's held-out error: judged
+without the code under test, so a case where the project's own fit of the true effect fails is a miss,
+not an unfair case (that fit's gain is printed beside it). Only fair cases are counted.
 A fair case is **named first** when the top candidate is the hidden effect (one of the pair),
 or names it as the one near-equivalent effect on these data (``Candidate.near_equivalent``: the
 diagnosis says both; a list of several names nothing; the share named alone is printed too),
@@ -98,14 +99,12 @@ def strength(effect: str, vessel, rng: np.random.Generator, answer: Response) ->
         return {"n_K": 1.0, "n_T": 1.0}
     if effect == "course_instability":  # the linear damping reversed to 20-50 % of the vessel's, held by a cubic one
         ratio = -rng.uniform(0.2, 0.5)
-        inertia = p["T1"] * p["T2"]
-        return {
-            "b0": p["K"] / inertia,
-            "b1": p["K"] * p["T3"] / inertia,
-            "c1": (p["T1"] + p["T2"]) / inertia,
-            "a1": ratio / inertia,
-            "a3": -ratio / (rng.uniform(0.3, 0.5) * r0) ** 2 / inertia,
-        }
+        stable = Structure("nomoto2", (effect,)).in_form(p)
+        return dict(
+            {k: stable[k] for k in ("b0", "b1", "m2")},
+            a1=ratio * stable["a1"],
+            a3=-ratio * stable["a1"] / (rng.uniform(0.3, 0.5) * r0) ** 2,
+        )
     if effect == "quadratic_yaw":
         return {"d_q": rng.uniform(0.5, 1.0) / r0}
     if effect == "rudder_stall":  # the moment 20-35 % short at the rudder used, within the bound 0.9 1/rad^2
@@ -154,9 +153,15 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
             result.training_windows,
         )
         true_run = free_run(true_fit.structure, true_fit.parameters, result.held_out)
-        row["true_improvement"] = max(
+        row["fitted_true_improvement"] = max(
             _improvement(result.run.fit["rmse_heading"], true_run.fit["rmse_heading"]),
             _improvement(result.run.fit["rmse_yaw_rate"], true_run.fit["rmse_yaw_rate"]),
+        )
+        # fairness without the code under test: the true model at its known parameters
+        known_run = free_run(Structure("nomoto2", hidden), sim.truth, result.held_out)
+        row["true_improvement"] = max(
+            _improvement(result.run.fit["rmse_heading"], known_run.fit["rmse_heading"]),
+            _improvement(result.run.fit["rmse_yaw_rate"], known_run.fit["rmse_yaw_rate"]),
         )
         row["fair"] = bool(row["true_improvement"] >= FAIR_SHARE)
         pair = top.near_equivalent if len(top.near_equivalent) == 1 else []  # several: no naming
@@ -190,7 +195,12 @@ def run_ours(quick: bool = False, seed: int = 0, count: int | None = None) -> di
             f"seed {case_seed}): top {row['top']} {100 * row['top_improvement']:.0f} %"
             + (f" (near-equivalent: {', '.join(row['near_equivalent'])})" if row.get("near_equivalent") else "")
             + f", {row['verdict']}"
-            + (f", true fit {100 * row['true_improvement']:.0f} %" if "true_improvement" in row else "")
+            + (
+                f", true model {100 * row['true_improvement']:.0f} % "
+                f"(fitted {100 * row['fitted_true_improvement']:.0f} %)"
+                if "true_improvement" in row
+                else ""
+            )
         )
         rows.append(row)
     fair = [r for r in rows if r.get("fair")]

@@ -32,9 +32,9 @@ MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite t
 MIN_YAW_RATE_STD = np.radians(0.02)  # rad/s: an absolute floor under the noise-relative need
 HARDLY_MOVES_SNR = 2.0  # yaw-rate std below this many noise levels: it hardly moves
 # Relative standard errors (std / |value|) above which a window does not determine a parameter.
-# The acceleration form's gain b (b0) and damping c1 likewise; its linear damping a1 may be near zero
+# The acceleration form's gain b (b0) likewise; its linear damping a1 may be near zero
 # (a marginally stable hull), where no relative error is small: the window is judged by the others.
-MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3, "b": 0.1, "b0": 0.1, "c1": 0.3}
+MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3, "b": 0.1, "b0": 0.1}
 
 
 @dataclass

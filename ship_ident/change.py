@@ -191,6 +191,8 @@ class ChangeDetector:
         half of those samples must be off, so spikes do not count. The run starts ``length`` s back,
         so that its unknown initial yaw acceleration has died out by then."""
         m = max(int(round(self.short / dataset.sample_time)), MIN_SHORT_SAMPLES)
+        if not dataset.segments:  # every sample lost to gaps: nothing to test
+            return math.nan
         start, stop = dataset.segments[-1]
         reference = self._reference(float(dataset.time[stop - m]), drop=False) if stop - start >= m else None
         if reference is None:
@@ -203,7 +205,7 @@ class ChangeDetector:
     def test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
         """(ratio of the newest block's error to the usual level, time (s) the vessel changed or None).
         The newest block is out of sample: the model is the newest one fitted before it began."""
-        if not self.ratio:
+        if not self.ratio or not dataset.segments:
             return math.nan, None
         short = self._short_ratio(structure, dataset)
         self.short_votes = CONFIRMATIONS if short > SHORT_RATIO_FACTOR * self.ratio else 0

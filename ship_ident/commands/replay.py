@@ -177,7 +177,7 @@ def run(args) -> int:
 
 def bag_time(stamp: float, start: float) -> str:
     """'65 s' from the bag's first stamp ``start`` (s), with the bag's clock when that is not the
-    start: '65 s, bag clock 1700000065 s'."""
+    start (a bag stamped in Unix time: '65 s, bag clock 1.7e9 s' written out in full)."""
     return f"{stamp - start:.0f} s" + (f", bag clock {stamp:.0f} s" if start else "")
 
 

@@ -184,8 +184,10 @@ def run_ours(quick: bool = False, seed: int = 0, count: int | None = None) -> di
         if k % (len(names) + 1) == len(names):
             hidden = ()
         elif rng.uniform() < PAIR_SHARE:
-            pair = rng.choice(len(names), 2, replace=False)
-            hidden = tuple(sorted((names[pair[0]], names[pair[1]])))
+            hidden = ()
+            while not hidden or set(hidden) & {r for e in hidden for r in EFFECTS[e].replaces}:
+                pair = rng.choice(len(names), 2, replace=False)  # not an effect with the one it includes
+                hidden = tuple(sorted((names[pair[0]], names[pair[1]])))
         else:
             hidden = (names[k % (len(names) + 1)],)
         case_seed = int(rng.integers(2**31))

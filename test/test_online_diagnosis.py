@@ -1,6 +1,7 @@
 """The diagnosis on board (online_diagnosis): the online core's window diagnosed on its schedule,
 on simulated trips with known hidden effects."""
 
+import copy
 import math
 import time
 from dataclasses import replace
@@ -95,6 +96,7 @@ def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     after = before.changed(effects=with_gyro)
     diagnosis = OnlineDiagnosis()
     named = windows(gyro, 90.0, 3, SEED_EFFECTS)
+    named_again = copy.deepcopy(named)
     assert [diagnosis.finish(d, before) for d in named] == [None, None, with_gyro]
     assert named[-1]["auto_add"]["action"] == "added" and named[-1]["candidates"][0]["effect"] == "gyro_bias"
     useless = windows(wind, 120.0, 2, with_gyro, step=60.0)
@@ -102,8 +104,9 @@ def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     assert diagnosis.finish(useless[0], after) is None  # one diagnosis of grace
     assert diagnosis.finish(useless[1], after) == SEED_EFFECTS
     assert useless[1]["auto_add"]["action"] == "removed" and "did not fall" in useless[1]["auto_add"]["sentence"]
-    for d in named:  # named again: not added again
+    for d in named_again:  # named again: not added again
         assert diagnosis.finish(d, before) is None
+    assert named_again[-1]["verdict"] == "missing_effect" and "auto_add" not in named_again[-1]
 
 
 def test_a_window_that_cannot_support_a_diagnosis_is_skipped_with_the_reason():
@@ -118,20 +121,19 @@ def test_a_window_that_cannot_support_a_diagnosis_is_skipped_with_the_reason():
 
 
 @pytest.mark.slow
-def test_the_worker_diagnoses_in_a_child_process_one_at_a_time_within_its_cpu_budget():
+def test_the_worker_diagnoses_in_a_child_process_one_at_a_time():
     sim = simulate("random", effects=SEED_EFFECTS + ("gyro_bias",), duration=100.0, seed=3)
     worker = DiagnosisWorker()
     try:
-        worker.submit((sim.dataset, "nomoto2", SEED_EFFECTS, 100.0))
-        assert "still runs" in worker.refusal(100.0)
+        worker.submit((sim.dataset, "nomoto2", SEED_EFFECTS, 100.0, -math.inf))
+        assert worker.busy
         deadline = time.monotonic() + 120.0
         while (result := worker.poll()) is None and time.monotonic() < deadline:
             time.sleep(0.1)
+        assert not worker.busy
         assert result["status"] == "done" and result["candidates"][0]["effect"] == "gyro_bias"
         assert result["compute_seconds"] > 0
-        budget = result["compute_seconds"] / 0.1
-        assert "CPU budget" in worker.refusal(100.0 + 0.5 * budget)
-        assert worker.refusal(100.0 + budget + 0.01) is None
+        assert result["held_out_slice"]["seconds"] == pytest.approx(35.0, abs=0.2)  # all of it is fresh
     finally:
         worker.close()
     assert not math.isnan(result["held_out_error"])

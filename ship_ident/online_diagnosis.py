@@ -17,8 +17,8 @@ with the errors of the model in force then and of each candidate refitted then
 (``held_out_slice``). ``PooledEvidence`` keeps the sums over the slices, from which a
 candidate's pooled share of the yaw-rate error removed (``1 - sqrt(sum e_after^2 / sum
 e_before^2)``) and its Diebold-Mariano t over all pooled samples follow: the mean squared-error
-drop over its standard error, with the effective sample size of each slice's autocorrelated
-differential summed over the independent slices. A candidate is **significant** when it removes
+drop over its standard error, the slices' variances of the summed differential (each from its
+own autocorrelation) added as independent. A candidate is **significant** when it removes
 at least ``MIN_IMPROVEMENT`` (15 %) of the pooled error with t >= ``SIGNIFICANCE_T`` (3) and its
 training free runs gain on average (``MIN_TRAINING_GAIN``): the rule of ``diagnose`` on more data.
 
@@ -193,12 +193,12 @@ def held_out_slice(result, since: float) -> dict | None:
     Rows are the model in force (``MODEL``) and every catalogued effect not in it (a candidate not
     fitted on these data counts with the model's errors: it adds nothing). With ``e_i`` the
     yaw-rate error (rad/s) of row i's free runs: ``squares[i] = sum e_i^2``; for each pair,
-    ``pair_squares[i][j] = sum (e_i^2 - e_j^2)^2`` and ``pair_effective[i][j]``, the effective
-    sample size of the differential ``e_i^2 - e_j^2`` (its autocorrelation; the free runs' errors
-    are smooth); ``training_gain[i]``, the share of the training free runs' yaw-rate error the
-    candidate removes, times the samples; ``noise_squares``, the noise floor squared times the
-    samples. A free run that diverges counts as missing the yaw rate by the slice's largest turn
-    rate plus the model's largest error there.
+    ``pair_variance[i][j]``, the variance of the slice's sum of the differential ``d = e_i^2 -
+    e_j^2``: ``sum (d - mean d)^2`` times ``n / n_eff``, with ``n_eff`` the effective sample size of
+    the autocorrelated ``d`` (the free runs' errors are smooth); ``training_gain[i]``, the share of
+    the training free runs' yaw-rate error the candidate removes, times the samples;
+    ``noise_squares``, the noise floor squared times the samples. A free run that diverges counts
+    as missing the yaw rate by the slice's largest turn rate plus the model's largest error there.
     """
     held = result.held_out
     measured = held.yaw_rate
@@ -223,12 +223,12 @@ def held_out_slice(result, since: float) -> dict | None:
         gains.append(float(candidate.training_gain) if np.isfinite(candidate.training_gain) else -1.0)
     squared = np.array(errors) ** 2
     rows = len(squared)
-    pair_squares, pair_effective = np.zeros((rows, rows)), np.zeros((rows, rows))
+    pair_variance = np.zeros((rows, rows))
     for i in range(rows):
         for j in range(i + 1, rows):
             d = squared[i] - squared[j]
-            pair_squares[i, j] = pair_squares[j, i] = float(d @ d)
-            pair_effective[i, j] = pair_effective[j, i] = n * effective_sample_fraction(d, max_lag=n // 4)
+            spread = float(np.sum((d - d.mean()) ** 2))
+            pair_variance[i, j] = pair_variance[j, i] = spread / effective_sample_fraction(d, max_lag=n // 4)
     times = held.time[fresh]
     return {
         "start": float(times[0]),
@@ -237,8 +237,7 @@ def held_out_slice(result, since: float) -> dict | None:
         "seconds": n * held.sample_time,
         "names": [MODEL, *names],
         "squares": squared.sum(axis=1).tolist(),
-        "pair_squares": pair_squares.tolist(),
-        "pair_effective": pair_effective.tolist(),
+        "pair_variance": pair_variance.tolist(),
         "training_gain": [n * g for g in gains],
         "noise_squares": n * float(result.noise["yaw_rate"]) ** 2,
     }
@@ -255,8 +254,7 @@ class PooledEvidence:
         self.slices = 0
         self.start = math.inf
         self.squares = np.zeros(rows)
-        self.pair_squares = np.zeros((rows, rows))
-        self.pair_effective = np.zeros((rows, rows))
+        self.pair_variance = np.zeros((rows, rows))
         self.training_gain_sum = np.zeros(rows)
         self.noise_squares = 0.0
 
@@ -266,8 +264,7 @@ class PooledEvidence:
         self.slices += 1
         self.start = min(self.start, piece["start"])
         self.squares += piece["squares"]
-        self.pair_squares += np.asarray(piece["pair_squares"])
-        self.pair_effective += np.asarray(piece["pair_effective"])
+        self.pair_variance += np.asarray(piece["pair_variance"])
         self.training_gain_sum += piece["training_gain"]
         self.noise_squares += piece["noise_squares"]
 
@@ -293,15 +290,14 @@ class PooledEvidence:
         return float(self.training_gain_sum[self.row(name)] / self.samples)
 
     def t_statistic(self, worse: str, better: str) -> float:
-        """Diebold-Mariano t that ``better``'s squared held-out error lies below ``worse``'s."""
+        """Diebold-Mariano t that ``better``'s squared held-out error lies below ``worse``'s: the
+        pooled sum of the differential over the square root of the sum of the slices' variances
+        of it (a slice where the two run alike adds nothing to either)."""
         i, j = self.row(worse), self.row(better)
-        if i == j:
+        variance = self.pair_variance[i, j]
+        if i == j or variance <= 0:
             return 0.0
-        mean = (self.squares[i] - self.squares[j]) / self.samples
-        variance = self.pair_squares[i, j] / self.samples - mean**2
-        if variance <= 0:
-            return 0.0
-        return float(mean / math.sqrt(variance / max(self.pair_effective[i, j], 1.0)))
+        return float((self.squares[i] - self.squares[j]) / math.sqrt(variance))
 
     def holds(self, name: str) -> bool:
         """The pooled evidence still points to ``name``: its t is significant and it removes some of

@@ -84,10 +84,10 @@ MIN_SLICE_SAMPLES = 10  # a slice with fewer fresh held-out samples adds nothing
 MIN_WINDOW_S = MIN_HELD_OUT_S / (1.0 - TRAINING_FRACTION)  # s of window that hold out MIN_HELD_OUT_S
 MODEL = "model"  # the model in force, first row of a slice's sums
 
-# What each effect's error grows with, and the manoeuvre that brings it out: the sentence that says
+# What the error each effect removes follows, and the manoeuvre that brings it out: the sentence that says
 # what would separate near-equivalent candidates.
 SIGNATURES = {
-    "rudder_offset": ("a constant turn at zero rudder", "straight legs with the rudder near zero"),
+    "rudder_offset": ("a constant moment (a turn at zero rudder)", "straight legs with the rudder near zero"),
     "cubic_yaw": ("the turn rate cubed", "turns held at several rates, gentle to the tightest"),
     "quadratic_yaw": ("the turn rate squared", "turns held at several rates, gentle to the tightest"),
     "rudder_delay": ("the rudder rate (a lag)", "quick rudder reversals, as in a zigzag"),
@@ -221,7 +221,17 @@ def held_out_slice(result, since: float) -> dict | None:
         error = (run.yaw_rate - measured)[fresh]
         errors.append(np.where(np.isfinite(error), error, worst))
         gains.append(float(candidate.training_gain) if np.isfinite(candidate.training_gain) else -1.0)
+    return slice_sums(
+        held.time[fresh], held.sample_time, [MODEL, *names], errors, gains, float(result.noise["yaw_rate"])
+    )
+
+
+def slice_sums(times, sample_time: float, names: list[str], errors: list, gains: list, noise_floor: float) -> dict:
+    """The sums of one held-out slice (see ``held_out_slice``) from its sample times (s), the
+    yaw-rate errors (rad/s) of each row of ``names`` on them, the rows' training gains and the
+    yaw-rate noise floor (rad/s)."""
     squared = np.array(errors) ** 2
+    n = squared.shape[1]
     rows = len(squared)
     pair_variance = np.zeros((rows, rows))
     for i in range(rows):
@@ -229,17 +239,16 @@ def held_out_slice(result, since: float) -> dict | None:
             d = squared[i] - squared[j]
             spread = float(np.sum((d - d.mean()) ** 2))
             pair_variance[i, j] = pair_variance[j, i] = spread / effective_sample_fraction(d, max_lag=n // 4)
-    times = held.time[fresh]
     return {
         "start": float(times[0]),
         "end": float(times[-1]),
         "samples": n,
-        "seconds": n * held.sample_time,
-        "names": [MODEL, *names],
+        "seconds": n * sample_time,
+        "names": list(names),
         "squares": squared.sum(axis=1).tolist(),
         "pair_variance": pair_variance.tolist(),
         "training_gain": [n * g for g in gains],
-        "noise_squares": n * float(result.noise["yaw_rate"]) ** 2,
+        "noise_squares": n * noise_floor**2,
     }
 
 
@@ -346,7 +355,7 @@ class PooledEvidence:
 def separation(group: list[str]) -> str:
     """What would tell the effects of ``group`` apart: what each one's error grows with, and the
     manoeuvres that bring the differences out."""
-    grows = "; ".join(f"{name} grows with {SIGNATURES.get(name, (EFFECTS[name].explanation, ''))[0]}" for name in group)
+    grows = "; ".join(f"{name} follows {SIGNATURES.get(name, (EFFECTS[name].explanation, ''))[0]}" for name in group)
     manoeuvres = list(dict.fromkeys(SIGNATURES[name][1] for name in group if name in SIGNATURES))
     return f"{grows}: {' or '.join(manoeuvres) or 'another manoeuvre'} would tell them apart"
 

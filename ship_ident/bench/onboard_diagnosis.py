@@ -53,11 +53,12 @@ QUICK = {"kinds": ("rudder_offset", "none"), "trip_s": 420.0, "named_by_s": 360.
 
 def trip_config(vessel_kind: str) -> OnlineConfig:
     """The node's configuration for a trip: the default one with nomoto2 and no effects (every
-    catalogued effect is a candidate), the window for the vessel's kind, the diagnosis every
-    ``PERIOD_S``, auto-add on."""
+    catalogued effect is a candidate), the speed log read, the window for the vessel's kind, the
+    diagnosis every ``PERIOD_S``, auto-add on."""
     return OnlineConfig(
         model="nomoto2",
         effects=(),
+        speed_topic=DEFAULT_TOPICS.speed,
         window_length=WINDOW_S[vessel_kind],
         sample_time=SAMPLE_TIME_S[vessel_kind],
         diagnosis_period=PERIOD_S,

@@ -492,6 +492,7 @@ class OnlineDiagnosis:
         self._rejected: set[str] = set()  # effects auto-add removed (not added again)
         self._in_force: tuple | None = None  # (model, effects) at the last refit
         self._vessel_note: str | None = None  # the identifier's last vessel_changed sentence
+        self._pool_from = -math.inf  # clock time (s) of the last vessel change: diagnoses due before it are not pooled
         self._asked: tuple | None = None  # effects auto-add asked for (its own change, not an outside one)
 
     def after_refit(self, record, identifier) -> tuple | None:
@@ -501,6 +502,7 @@ class OnlineDiagnosis:
         note = record.conditions.get("vessel_changed")
         if note is not None and note != self._vessel_note:
             self._restart_pool("the vessel changed")
+            self._pool_from = record.time
         self._vessel_note = note
         now = record.time
         finished = self.runner.poll()  # first: a diagnosis that just ended frees the runner
@@ -573,11 +575,11 @@ class OnlineDiagnosis:
         held-out slice, complete it in place (each candidate's ``pooled`` figures and pooled
         ``significant``, the pooled verdict and its sentence, the ``ros2 param set`` command), keep
         the ``missing_effect`` warning, run auto-add; return the effects auto-add sets (None:
-        unchanged). A skipped diagnosis, or one of another model than ``config``'s (it started
-        before a change), changes nothing."""
+        unchanged). A skipped diagnosis, or one of another model than ``config``'s or due before
+        the vessel last changed (it waited or ran meanwhile), changes nothing."""
         piece = result.pop("held_out_slice", None)
         structure = (result["structure"]["model"], tuple(result["structure"]["effects"]))
-        current = structure == (config.model, tuple(config.effects))
+        current = structure == (config.model, tuple(config.effects)) and result["stamp"] >= self._pool_from
         if result["status"] != "done" or not current:
             return None
         self._take_structure(structure)

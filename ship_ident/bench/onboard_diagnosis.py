@@ -170,6 +170,11 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
             + (f", fair {row['fair']} ({100 * row['true_improvement']:.0f} %)" if "fair" in row else "")
         )
         rows.append(row)
+    return dict(summary(rows, kinds), seed=seed, trip_seconds=trip_s, named_by_seconds=named_by_s)
+
+
+def summary(rows: list[dict], kinds=KINDS) -> dict:
+    """The figures over the trips ``rows`` (``run_trip``'s), overall and per hidden kind."""
     fair = [r for r in rows if r.get("fair")]
     none = [r for r in rows if r["hidden"] == "none"]
     added_hidden = [r for r in rows if r["added"] is not None and r["added"] == r["hidden"]]
@@ -188,10 +193,7 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
             "done": sum(r["done"] for r in of_kind),
         }
     return {
-        "seed": seed,
         "trips": len(rows),
-        "trip_seconds": trip_s,
-        "named_by_seconds": named_by_s,
         "fair": len(fair),
         "named_in_time": share(fair, "named_in_time"),
         "named_first_in_time": share(fair, "named_first_in_time"),

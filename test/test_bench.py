@@ -7,6 +7,7 @@ import pytest
 
 from ship_ident.bench import benchmarks
 from ship_ident.bench.crb import cramer_rao_bound
+from ship_ident.bench.onboard_diagnosis import at_floor
 from ship_ident.cli import main
 from ship_ident.dataset import Dataset
 from ship_ident.estimators import DEFAULT_METHOD
@@ -90,6 +91,6 @@ def test_onboard_diagnosis_quick_names_a_hidden_rudder_offset_once_and_raises_no
     offset, none = result["rows"]
     assert offset["hidden"] == "rudder_offset" and offset["fair"]
     assert offset["named_first_in_time"] and offset["changes"] == 0  # measured: named at 125 s
-    assert offset["added"] == "rudder_offset" and offset["at_floor_after_add"]
+    assert offset["added"] == "rudder_offset" and at_floor(offset, "pooled")
     assert none["hidden"] == "none" and none["done"] >= 3 and none["missing_effect"] == 0
     assert result["skipped"].keys() <= {"the window holds 65 s", "too little excitation"}

@@ -2,32 +2,48 @@
 
 Every ``diagnosis_period`` seconds (node clock, or the bag's time in replay) the identifier's
 window is diagnosed as ``ship-ident diagnose`` diagnoses a record (``diagnose.diagnose``, the same
-ranking): the model in force is fitted on the older ``TRAINING_FRACTION`` (65 %) of the window
-and run free on the newest 35 % (held out, cut into free-run windows, each started from the
-measured heading and yaw rate); every effect not in the model is added in turn, refitted and
-judged on the same held-out runs. The **held-out error** is the yaw-rate RMSE of those free runs
-(rad/s); with the right model it sits at the yaw-rate **noise floor** (the sensor's noise,
-rad/s), and an effect the model lacks lifts it above. Adding the effect makes it fall.
+ranking): the model in force is fitted on the older ``TRAINING_FRACTION`` (65 %) of the window and
+run free on the newest 35 % (held out, cut into free-run windows, each started from the measured
+heading and yaw rate); every effect not in the model is added in turn, refitted and judged on the
+same held-out runs. The **held-out error** is the yaw-rate RMSE of those free runs (rad/s); with
+the right model it sits at the yaw-rate **noise floor** (the sensor's noise, rad/s), and an effect
+the model lacks lifts it above. Adding the effect makes it fall.
 
-A single window holds about a minute of held-out data, where a weak effect's t statistic
-(``diagnose.loss_t_statistic``) scatters about 3. A candidate is therefore also significant when
-its t, pooled over the last ``POOLED_DIAGNOSES`` diagnoses of the same model (Stouffer:
-sum t / sqrt(n), each t clipped to [-3, 6] so that no single window carries the pool), reaches
-``SIGNIFICANCE_T`` while it removes on average at least ``MIN_IMPROVEMENT`` of the held-out
-yaw-rate error and the newest window's training free runs gain too (``MIN_TRAINING_GAIN``).
-The verdict ``missing_effect`` raises a ``missing_effect`` WARN in the refit records (and so in
-``/diagnostics``) until a later diagnosis or a new model clears it.
+**Pooled evidence.** The hull does not change between diagnoses unless the identifier's change
+test says so (``vessel_changed``), so the verdict rests on every held-out slice since the model
+(its effects) or the vessel last changed, not on the newest window alone: each diagnosis adds the
+part of its held-out data no earlier diagnosis held out (a *slice*, about ``diagnosis_period`` s),
+with the errors of the model in force then and of each candidate refitted then
+(``held_out_slice``). ``PooledEvidence`` keeps the sums over the slices, from which a
+candidate's pooled share of the yaw-rate error removed (``1 - sqrt(sum e_after^2 / sum
+e_before^2)``) and its Diebold-Mariano t over all pooled samples follow: the mean squared-error
+drop over its standard error, the slices' variances of the summed differential (each from its
+own autocorrelation) added as independent. A candidate is **significant** when it removes
+at least ``MIN_IMPROVEMENT`` (15 %) of the pooled error with t >= ``SIGNIFICANCE_T`` (3) and its
+training free runs gain on average (``MIN_TRAINING_GAIN``): the rule of ``diagnose`` on more data.
+
+**One name.** Once an effect is named ``missing_effect``, the verdict names it as long as the pool
+holds it (its t stays significant: slices where the effect does not show dilute its share of the
+pooled error but are no evidence against it); another is named only when its pooled error is
+significantly below the named one's (t >= ``SIGNIFICANCE_T`` on their loss differential) or the
+named one's evidence is gone while another's holds: the pooled evidence reversed, and the sentence
+says so. Candidates the pool cannot tell from the named one (removing at least
+``MIN_IMPROVEMENT``, within ``EQUIVALENT_MARGIN`` of its share, not significantly worse) are
+named with it as a group, with what would separate them
+(``SIGNATURES``). Adding or removing an effect, or a changed vessel, starts a new pool.
 
 With ``auto_add_effects``, an effect named in ``auto_add_after`` consecutive diagnoses is added
-to the model, and removed again when none of the next ``CHECK_DIAGNOSES`` diagnoses of the new
-model shows its held-out error below (1 - ``MIN_IMPROVEMENT``) times the error before; a removed
-effect is not added again until the model is changed from outside.
+to the model; it is kept when, within ``CHECK_DIAGNOSES`` diagnoses of the new model, the pooled
+held-out error falls by ``MIN_IMPROVEMENT`` from the pooled error before or lies within
+``NOISE_MARGIN`` of the noise floor, and removed again otherwise; a removed effect is not added
+again until the model is changed from outside.
 
-A diagnosis is skipped, with a reason, when the window cannot support it: too short to hold
-out ``MIN_HELD_OUT_S``, too little excitation, the fit failed; on the node also while the
-previous one still runs or the CPU budget is spent. The node runs diagnoses in a child process at
-low priority (``DiagnosisWorker``), so a refit never waits for one; replay runs them inline at
-the refit where they are due (``InlineRunner``), so a replay is reproducible.
+A diagnosis is skipped, with a reason, only when the window cannot support it: too short to hold
+out ``MIN_HELD_OUT_S``, too little excitation, the fit failed. The node runs diagnoses in a child
+process at low priority (``DiagnosisWorker``), so a refit never waits for one; a diagnosis due
+while the previous one runs waits for it with the window as it was when due (``MAX_QUEUED``).
+Replay runs them inline at the refit where they are due (``InlineRunner``), so a replay is
+reproducible.
 """
 
 from __future__ import annotations
@@ -44,22 +60,60 @@ import numpy as np
 
 from .dataset import DataError, Dataset
 from .diagnose import DEFAULT_METHOD as DIAGNOSIS_METHOD
-from .diagnose import MIN_HELD_OUT_S, MIN_IMPROVEMENT, MIN_TRAINING_GAIN, SIGNIFICANCE_T, TRAINING_FRACTION, diagnose
+from .diagnose import (
+    EQUIVALENT_MARGIN,
+    MIN_HELD_OUT_S,
+    MIN_IMPROVEMENT,
+    MIN_TRAINING_GAIN,
+    NOISE_MARGIN,
+    PARSIMONY,
+    SIGNIFICANCE_T,
+    TRAINING_FRACTION,
+    diagnose,
+    free_run,
+)
+from .effects import EFFECTS
 from .estimators.base import excitation_shortfall
+from .metrics import effective_sample_fraction
 from .structure import StructureError
 
-POOLED_DIAGNOSES = 3  # t statistics pooled over this many diagnoses of the same model
-POOLED_T_LIMITS = (-SIGNIFICANCE_T, 2 * SIGNIFICANCE_T)  # each window's t clipped to this before pooling
 CHECK_DIAGNOSES = 2  # an added effect must cut the held-out error within this many diagnoses
 WORST_SHOWN = 3  # worst free-run segments (with their conditions) in the record
-CPU_BUDGET = 0.1  # node: a diagnosis may start once the last one's CPU time is this share of the time since
 NICENESS = 10  # the diagnosis process yields the CPU to the refits
+MAX_QUEUED = 3  # node: diagnoses due while one runs wait, up to this many; beyond, the oldest is skipped
+MIN_SLICE_SAMPLES = 10  # a slice with fewer fresh held-out samples adds nothing to the pool
 MIN_WINDOW_S = MIN_HELD_OUT_S / (1.0 - TRAINING_FRACTION)  # s of window that hold out MIN_HELD_OUT_S
+MODEL = "model"  # the model in force, first row of a slice's sums
+
+# What the error each effect removes follows, and the manoeuvre that brings it out: the sentence that says
+# what would separate near-equivalent candidates.
+SIGNATURES = {
+    "rudder_offset": ("a constant moment (a turn at zero rudder)", "straight legs with the rudder near zero"),
+    "cubic_yaw": ("the turn rate cubed", "turns held at several rates, gentle to the tightest"),
+    "quadratic_yaw": ("the turn rate squared", "turns held at several rates, gentle to the tightest"),
+    "rudder_delay": ("the rudder rate (a lag)", "quick rudder reversals, as in a zigzag"),
+    "wind_yaw": ("the heading", "legs on several headings"),
+    "gyro_bias": (
+        "nothing the boat does (a gyro offset: the compass heading does not turn with it)",
+        "a straight leg, where the heading holds while a biased gyro reads a turn",
+    ),
+    "speed_dependence": ("the speed", "legs at different speeds"),
+    "course_instability": (
+        "the turn rate near zero (the linear damping)",
+        "small rudder steps about zero held for a while (a spiral or pull-out test)",
+    ),
+    "rudder_stall": ("the rudder angle beyond its linear range", "steps to large as well as small rudder angles"),
+}
 
 
 def add_command(node: str, effects) -> str:
     """The shell command that sets the node's effects: ``ros2 param set NODE effects "[a, b]"``."""
     return f'ros2 param set {node} effects "[{", ".join(effects)}]"'
+
+
+def duration_text(seconds: float) -> str:
+    """``12 s`` below a minute, else ``3.5 min``."""
+    return f"{seconds:.0f} s" if seconds < 60.0 else f"{seconds / 60.0:.1f} min"
 
 
 # --- one diagnosis (runs in the child process on the node) ----------------------------------
@@ -85,10 +139,11 @@ def too_short(dataset: Dataset) -> str | None:
     )
 
 
-def diagnose_window(dataset: Dataset, model: str, effects: tuple, stamp: float) -> dict:
+def diagnose_window(dataset: Dataset, model: str, effects: tuple, stamp: float, since: float = -math.inf) -> dict:
     """The diagnosis of one window at clock time ``stamp`` (s), as a JSON-ready dict: ``status``
-    ``done`` with the window's own verdict, candidates, held-out error and noise floor (rad/s),
-    or ``skipped`` with the ``reason``. Never raises on bad data."""
+    ``done`` with the window's own verdict, candidates, held-out error and noise floor (rad/s) and
+    ``held_out_slice``, the sums of its held-out samples later than ``since`` (s) for the pool
+    (``held_out_slice``); or ``skipped`` with the ``reason``. Never raises on bad data."""
     started = time.process_time()
     reason = too_short(dataset) or excitation_shortfall(dataset)
     record = skipped(stamp, model, effects, reason)
@@ -103,6 +158,7 @@ def diagnose_window(dataset: Dataset, model: str, effects: tuple, stamp: float) 
             else:
                 del record["reason"]
                 record.update(_done(result))
+                record["held_out_slice"] = held_out_slice(result, since)
     record["window"] = {"start": float(dataset.time[0]), "end": float(dataset.time[-1])}
     record["compute_seconds"] = time.process_time() - started
     return record
@@ -125,9 +181,184 @@ def _done(result) -> dict:
             "end": float(held_out.time[-1]),
             "windows": len(held_out.segments),
         },
+        "pinned": [w["message"] for w in result.pinned],
         "worst_conditions": result.worst_segments[:WORST_SHOWN],
         "parameters": {k: float(v) for k, v in result.estimate.parameters.items()},
     }
+
+
+def held_out_slice(result, since: float) -> dict | None:
+    """The sums the pool needs from the held-out samples of ``result`` (a ``diagnose.Diagnosis``)
+    later than ``since`` (s), or None when fewer than ``MIN_SLICE_SAMPLES`` are.
+
+    Rows are the model in force (``MODEL``) and every catalogued effect not in it (a candidate not
+    fitted on these data counts with the model's errors: it adds nothing). With ``e_i`` the
+    yaw-rate error (rad/s) of row i's free runs: ``squares[i] = sum e_i^2``; for each pair,
+    ``pair_variance[i][j]``, the variance of the slice's sum of the differential ``d = e_i^2 -
+    e_j^2``: ``sum (d - mean d)^2`` times ``n / n_eff``, with ``n_eff`` the effective sample size of
+    the autocorrelated ``d`` (the free runs' errors are smooth); ``training_gain[i]``, the share of
+    the training free runs' yaw-rate error the candidate removes, times the samples;
+    ``noise_squares``, the noise floor squared times the samples. A free run that diverges counts
+    as missing the yaw rate by the slice's largest turn rate plus the model's largest error there.
+    """
+    held = result.held_out
+    measured = held.yaw_rate
+    model_error = result.run.yaw_rate - measured
+    fresh = (held.time > since) & np.isfinite(model_error)
+    n = int(fresh.sum())
+    if n < MIN_SLICE_SAMPLES:
+        return None
+    names = [name for name in EFFECTS if name not in result.structure.effect_names]
+    by_name = {c.effect: c for c in result.candidates}
+    worst = float(np.max(np.abs(measured[fresh])) + np.max(np.abs(model_error[fresh])))
+    errors, gains = [model_error[fresh]], [0.0]
+    for name in names:
+        candidate = by_name.get(name)
+        if candidate is None or candidate.estimate is None:
+            errors.append(model_error[fresh])
+            gains.append(0.0)
+            continue
+        run = free_run(candidate.estimate.structure, candidate.estimate.parameters, held)
+        error = (run.yaw_rate - measured)[fresh]
+        errors.append(np.where(np.isfinite(error), error, worst))
+        gains.append(float(candidate.training_gain) if np.isfinite(candidate.training_gain) else -1.0)
+    return slice_sums(
+        held.time[fresh], held.sample_time, [MODEL, *names], errors, gains, float(result.noise["yaw_rate"])
+    )
+
+
+def slice_sums(times, sample_time: float, names: list[str], errors: list, gains: list, noise_floor: float) -> dict:
+    """The sums of one held-out slice (see ``held_out_slice``) from its sample times (s), the
+    yaw-rate errors (rad/s) of each row of ``names`` on them, the rows' training gains and the
+    yaw-rate noise floor (rad/s)."""
+    squared = np.array(errors) ** 2
+    n = squared.shape[1]
+    rows = len(squared)
+    pair_variance = np.zeros((rows, rows))
+    for i in range(rows):
+        for j in range(i + 1, rows):
+            d = squared[i] - squared[j]
+            spread = float(np.sum((d - d.mean()) ** 2))
+            pair_variance[i, j] = pair_variance[j, i] = spread / effective_sample_fraction(d, max_lag=n // 4)
+    return {
+        "start": float(times[0]),
+        "end": float(times[-1]),
+        "samples": n,
+        "seconds": n * sample_time,
+        "names": list(names),
+        "squares": squared.sum(axis=1).tolist(),
+        "pair_variance": pair_variance.tolist(),
+        "training_gain": [n * g for g in gains],
+        "noise_squares": n * noise_floor**2,
+    }
+
+
+class PooledEvidence:
+    """The held-out slices of one model on one vessel, summed (see ``held_out_slice``)."""
+
+    def __init__(self, names: list[str]):
+        self.names = list(names)
+        rows = len(names)
+        self.samples = 0
+        self.seconds = 0.0
+        self.slices = 0
+        self.start = math.inf
+        self.squares = np.zeros(rows)
+        self.pair_variance = np.zeros((rows, rows))
+        self.training_gain_sum = np.zeros(rows)
+        self.noise_squares = 0.0
+
+    def add(self, piece: dict) -> None:
+        self.samples += piece["samples"]
+        self.seconds += piece["seconds"]
+        self.slices += 1
+        self.start = min(self.start, piece["start"])
+        self.squares += piece["squares"]
+        self.pair_variance += np.asarray(piece["pair_variance"])
+        self.training_gain_sum += piece["training_gain"]
+        self.noise_squares += piece["noise_squares"]
+
+    def row(self, name: str) -> int:
+        return self.names.index(name)
+
+    @property
+    def error(self) -> float:
+        """Pooled held-out yaw-rate RMSE of the model in force (rad/s)."""
+        return math.sqrt(self.squares[0] / self.samples)
+
+    @property
+    def noise_floor(self) -> float:
+        """Pooled yaw-rate noise floor (rad/s)."""
+        return math.sqrt(self.noise_squares / self.samples)
+
+    def improvement(self, name: str) -> float:
+        """Share of the pooled held-out yaw-rate error that adding ``name`` removes."""
+        return 1.0 - math.sqrt(self.squares[self.row(name)] / self.squares[0]) if self.squares[0] > 0 else 0.0
+
+    def training_gain(self, name: str) -> float:
+        """Sample-weighted mean share of the training free runs' yaw-rate error ``name`` removes."""
+        return float(self.training_gain_sum[self.row(name)] / self.samples)
+
+    def t_statistic(self, worse: str, better: str) -> float:
+        """Diebold-Mariano t that ``better``'s squared held-out error lies below ``worse``'s: the
+        pooled sum of the differential over the square root of the sum of the slices' variances
+        of it (a slice where the two run alike adds nothing to either)."""
+        i, j = self.row(worse), self.row(better)
+        variance = self.pair_variance[i, j]
+        if i == j or variance <= 0:
+            return 0.0
+        return float((self.squares[i] - self.squares[j]) / math.sqrt(variance))
+
+    def holds(self, name: str) -> bool:
+        """The pooled evidence still points to ``name``: its t is significant and it removes some of
+        the error. (Slices where its effect does not show dilute its share of the pooled error, not
+        its t: they are no evidence against it.)"""
+        return bool(self.improvement(name) > 0 and self.t_statistic(MODEL, name) >= SIGNIFICANCE_T)
+
+    def significant(self, name: str) -> bool:
+        """``name`` removes a significant share of the pooled error (the rule of ``diagnose``)."""
+        return bool(
+            self.improvement(name) >= MIN_IMPROVEMENT
+            and self.t_statistic(MODEL, name) >= SIGNIFICANCE_T
+            and self.training_gain(name) >= MIN_TRAINING_GAIN
+        )
+
+    def rank(self, name: str) -> float:
+        """Ranking score: the pooled improvement, each parameter costing ``PARSIMONY``."""
+        return self.improvement(name) - PARSIMONY * len(EFFECTS[name].parameters)
+
+    def equivalents(self, leader: str) -> list[str]:
+        """The candidates the pool cannot tell from ``leader``: removing at least ``MIN_IMPROVEMENT``,
+        within ``EQUIVALENT_MARGIN`` of ``leader``'s improvement (or above it) and with a held-out
+        error ``leader``'s is not significantly below; best first."""
+        lead = self.improvement(leader)
+        group = [
+            name
+            for name in self.names[1:]
+            if name != leader
+            and self.improvement(name) >= MIN_IMPROVEMENT
+            and lead - self.improvement(name) <= EQUIVALENT_MARGIN
+            and self.t_statistic(name, leader) < SIGNIFICANCE_T
+        ]
+        return sorted(group, key=lambda name: -self.rank(name))
+
+    def summary(self, origin: str) -> dict:
+        return {
+            "since": origin,
+            "start": self.start,
+            "seconds": self.seconds,
+            "slices": self.slices,
+            "held_out_error": self.error,
+            "noise_floor": self.noise_floor,
+        }
+
+
+def separation(group: list[str]) -> str:
+    """What would tell the effects of ``group`` apart: what each one's error grows with, and the
+    manoeuvres that bring the differences out."""
+    grows = "; ".join(f"{name} follows {SIGNATURES.get(name, (EFFECTS[name].explanation, ''))[0]}" for name in group)
+    manoeuvres = list(dict.fromkeys(SIGNATURES[name][1] for name in group if name in SIGNATURES))
+    return f"{grows}: {' or '.join(manoeuvres) or 'another manoeuvre'} would tell them apart"
 
 
 def _run(job: tuple) -> dict:
@@ -136,13 +367,12 @@ def _run(job: tuple) -> dict:
 
 # --- where diagnoses run ------------------------------------------------------------------
 class InlineRunner:
-    """Runs a diagnosis at once, in the caller's thread (replay: reproducible, no CPU budget)."""
+    """Runs a diagnosis at once, in the caller's thread (replay: reproducible)."""
+
+    busy = False
 
     def __init__(self):
         self._result = None
-
-    def refusal(self, now: float) -> str | None:
-        return None
 
     def submit(self, job: tuple) -> None:
         self._result = _run(job)
@@ -167,33 +397,25 @@ def _serve(connection) -> None:
         try:
             result = _run(job)
         except Exception as exc:  # a bug in a diagnosis must not end the process serving them
-            _, model, effects, stamp = job
+            _, model, effects, stamp, _ = job
             result = skipped(stamp, model, effects, f"diagnosis failed: {type(exc).__name__}: {exc}")
         connection.send(result)
 
 
 class DiagnosisWorker:
     """Runs diagnoses in one child process at low priority (``NICENESS``), one at a time, so a
-    refit never waits for one; a new diagnosis starts only when the last one's CPU time is at most
-    ``CPU_BUDGET`` of the time since it started. The child starts with ``start`` (the node: at its
-    start, so that its imports run while the window fills) or at the first diagnosis (``spawn``: a
-    fresh interpreter, never a fork of the ROS process and its threads)."""
+    refit never waits for one. The child starts with ``start`` (the node: at its start, so that its
+    imports run while the window fills) or at the first diagnosis (``spawn``: a fresh interpreter,
+    never a fork of the ROS process and its threads)."""
 
     def __init__(self):
         self._process = self._connection = None
         self._job = None  # (stamp, model, effects) of the diagnosis in progress
-        self._budget_until = -math.inf  # clock time (s) before which no diagnosis starts
 
-    def refusal(self, now: float) -> str | None:
-        """Why no diagnosis can start at clock time ``now`` (s), or None."""
-        if self._job is not None:
-            return f"the previous diagnosis (started at {self._job[0]:.1f} s) still runs"
-        if now < self._budget_until:
-            return (
-                f"CPU budget ({100 * CPU_BUDGET:g} % of one core): the last diagnosis used its share "
-                f"until {self._budget_until:.1f} s"
-            )
-        return None
+    @property
+    def busy(self) -> bool:
+        """A diagnosis is in progress."""
+        return self._job is not None
 
     def start(self) -> None:
         """Start the child process now (its imports take seconds) unless it runs already."""
@@ -225,7 +447,6 @@ class DiagnosisWorker:
             result = skipped(stamp, model, effects, f"the diagnosis process ended (exit code {self._process.exitcode})")
             self._process = None
         self._job = None
-        self._budget_until = stamp + result["compute_seconds"] / CPU_BUDGET
         return result
 
     def close(self) -> None:
@@ -240,7 +461,7 @@ class DiagnosisWorker:
 # --- the schedule, the pooled verdict and auto-add ------------------------------------------
 @dataclass
 class Trial:
-    """An effect added by the node itself, on probation: its held-out error before (rad/s)."""
+    """An effect added by the node itself, on probation: the pooled held-out error before (rad/s)."""
 
     effect: str
     error_before: float
@@ -250,7 +471,8 @@ class Trial:
 class OnlineDiagnosis:
     """Diagnoses the identifier's window every ``diagnosis_period`` (its configuration, read at
     each refit; 0: off) through ``runner`` (``InlineRunner`` by default, ``DiagnosisWorker`` on the
-    node); pools the verdict over the last diagnoses and runs ``auto_add_effects``.
+    node); pools the held-out evidence since the model or the vessel last changed and runs
+    ``auto_add_effects``.
 
     ``after_refit(record, identifier)`` is called after every refit: it starts a due diagnosis,
     puts a finished one into ``record.diagnosis`` and the ``missing_effect`` WARN into
@@ -262,34 +484,50 @@ class OnlineDiagnosis:
         self.runner = runner or InlineRunner()
         self.node = node
         self._next_due: float | None = None
-        self._history: deque = deque(maxlen=POOLED_DIAGNOSES)  # done diagnoses of one model, oldest first
+        self._queued: deque = deque()  # jobs due while the runner was busy, oldest first
+        self._pool: PooledEvidence | None = None  # held-out slices since the model or vessel changed
+        self._origin = "the start"  # what started the pool
+        self._held_out_until = -math.inf  # s: held-out data up to here are in the pool (or on their way)
+        self._named: str | None = None  # the effect the pool named missing
         self._warning: tuple | None = None  # ((model, effects), sentence) of the last missing_effect
         self._streak: tuple[str, int] = ("", 0)  # effect named in consecutive diagnoses, how many
         self._trial: Trial | None = None
         self._rejected: set[str] = set()  # effects auto-add removed (not added again)
         self._in_force: tuple | None = None  # (model, effects) at the last refit
+        self._vessel_note: str | None = None  # the identifier's last vessel_changed sentence
+        self._pool_from = -math.inf  # clock time (s) of the last vessel change: diagnoses due before it are not pooled
         self._asked: tuple | None = None  # effects auto-add asked for (its own change, not an outside one)
 
     def after_refit(self, record, identifier) -> tuple | None:
         config = identifier.config
         structure = (config.model, tuple(config.effects))
-        if self._in_force is not None and structure != self._in_force:
-            self._model_changed(structure)
-        self._in_force = structure
+        self._take_structure(structure)
+        note = record.conditions.get("vessel_changed")
+        if note is not None and note != self._vessel_note:
+            self._restart_pool("the vessel changed")
+            self._pool_from = record.time
+        self._vessel_note = note
         now = record.time
-        finished = self.runner.poll()  # first: a diagnosis that just ended frees the runner for a due one
+        finished = self.runner.poll()  # first: a diagnosis that just ended frees the runner
+        if self._queued and not self.runner.busy:
+            self.runner.submit(self._queued.popleft())
         if config.diagnosis_period > 0 and self._is_due(now, config.diagnosis_period):
-            refusal = self.runner.refusal(now)
+            try:
+                dataset = identifier.window_dataset(now)
+            except DataError as exc:
+                refusal = f"window unusable: {exc}"
+            else:
+                refusal = too_short(dataset)  # said here: no process started for it
             if refusal is None:
-                try:
-                    dataset = identifier.window_dataset(now)
-                except DataError as exc:
-                    refusal = f"window unusable: {exc}"
-                else:
-                    refusal = too_short(dataset)  # said here: no process started for it
-                    if refusal is None:
-                        self.runner.submit((dataset, config.model, tuple(config.effects), now))
-                        finished = finished or self.runner.poll()  # inline: done at once
+                job = (dataset, config.model, tuple(config.effects), now, self._held_out_until)
+                self._held_out_until = float(dataset.time[-1])
+                if len(self._queued) >= MAX_QUEUED:
+                    late = self._queued.popleft()
+                    refusal = f"the diagnosis due at {late[3]:.1f} s was dropped: the diagnosis process is behind"
+                self._queued.append(job)
+                if not self.runner.busy:
+                    self.runner.submit(self._queued.popleft())
+                    finished = finished or self.runner.poll()  # inline: done at once
             if refusal is not None and finished is None:  # (a finished one is the news of this refit)
                 record.diagnosis = skipped(now, config.model, config.effects, refusal)
         change = None
@@ -312,89 +550,175 @@ class OnlineDiagnosis:
         self._next_due = self._next_due + period if now - self._next_due < period else now + period
         return True
 
-    def _model_changed(self, structure: tuple) -> None:
-        """The model in force changed: its history, streak and warning no longer apply; a change
-        from outside (not auto-add's own) ends a trial and forgives the removed effects."""
-        self._history.clear()
+    def _restart_pool(self, origin: str) -> None:
+        """Forget the pooled evidence (and the effect it named): ``origin`` says why."""
+        self._pool = None
+        self._origin = origin
+        self._held_out_until = -math.inf
+        self._named = None
         self._streak = ("", 0)
         self._warning = None
+
+    def _take_structure(self, structure: tuple) -> None:
+        """``structure`` (model, effects) is in force; when it changed, the pool starts anew and a
+        change from outside (not auto-add's own) ends a trial and forgives the removed effects."""
+        if self._in_force is not None and structure != self._in_force:
+            self._model_changed(structure)
+        self._in_force = structure
+
+    def _model_changed(self, structure: tuple) -> None:
+        self._restart_pool(f"{'+'.join(structure[1]) or 'no effects'} came into force")
         if structure[1] != self._asked:
             self._trial = None
             self._rejected.clear()
         self._asked = None
 
     def finish(self, result: dict, config) -> tuple | None:
-        """Take a finished diagnosis ``result`` of the model configured in ``config``: complete it in
-        place (each candidate's pooled ``significant`` and ``pooled_t``, the verdict, the ``ros2
-        param set`` command), keep the ``missing_effect`` warning, run auto-add; return the effects
-        auto-add sets (None: unchanged). A skipped diagnosis, or one of another model than
-        ``config``'s (it started before a change), changes nothing."""
+        """Take a finished diagnosis ``result`` of the model configured in ``config``: pool its
+        held-out slice, complete it in place (each candidate's ``pooled`` figures and pooled
+        ``significant``, the pooled verdict and its sentence, the ``ros2 param set`` command), keep
+        the ``missing_effect`` warning, run auto-add; return the effects auto-add sets (None:
+        unchanged). A skipped diagnosis, or one of another model than ``config``'s or due before
+        the vessel last changed (it waited or ran meanwhile), changes nothing."""
+        piece = result.pop("held_out_slice", None)
         structure = (result["structure"]["model"], tuple(result["structure"]["effects"]))
-        current = structure == (config.model, tuple(config.effects))
+        current = structure == (config.model, tuple(config.effects)) and result["stamp"] >= self._pool_from
         if result["status"] != "done" or not current:
             return None
-        if self._history and self._history[-1]["structure"] != result["structure"]:
-            self._history.clear()  # pooled over diagnoses of one model only
-        self._history.append(result)
-        found = self._pool(result)
+        self._take_structure(structure)
+        if piece is not None:
+            if self._pool is None or self._pool.names != piece["names"]:
+                self._pool = PooledEvidence(piece["names"])
+            self._pool.add(piece)
+        pool = self._pool
+        if pool is None:  # nothing fresh held out yet: the window's own verdict stands
+            result["add_command"] = None
+            return None
+        found, reversal = self._name(pool)
+        self._mark(result, pool, found)
+        result["pooled"] = pool.summary(self._origin)
         effects = structure[1]
+        rests_on = f"{duration_text(pool.seconds)} of held-out data since {self._origin}"
+        ratio = pool.error / pool.noise_floor if pool.noise_floor > 0 else math.inf
         if found is not None:
             top = next(c for c in result["candidates"] if c["effect"] == found)
+            group = pool.equivalents(found)
             result["verdict"] = "missing_effect"
+            result["near_equivalent"] = group
             result["add_command"] = add_command(self.node, effects + (found,))
-            if top["significant_in_window"]:
-                t = f"t {top['t_statistic']:.1f}"
-            else:
-                t = f"t {top['pooled_t']:.1f} pooled over the last {len(self._history)} diagnoses"
             result["verdict_sentence"] = (
-                f"{found} is missing: adding it removes {100 * top['improvement_yaw_rate']:.0f} % of the held-out "
-                f"yaw-rate error ({t}); {top['evidence']}"
+                f"{found} is missing: on the {rests_on} (held-out error {ratio:.1f} times the noise floor) "
+                f"adding it removes {100 * pool.improvement(found):.0f} % of the yaw-rate error "
+                f"(t {pool.t_statistic(MODEL, found):.1f}); {top['evidence']}"
+                + (
+                    f"; near-equivalent on these data: {', '.join(group)} ({self._shares(pool, group)}); "
+                    f"{separation([found, *group])}"
+                    if group
+                    else ""
+                )
+                + (f"; {reversal}" if reversal else "")
             )
             self._warning = (structure, f"{result['verdict_sentence']}; add it: {result['add_command']}")
         else:
             result["add_command"] = None
+            result["near_equivalent"] = []
             self._warning = None
+            self._verdict_without(result, pool, rests_on, ratio)
         return self._auto_add(result, found, effects, config)
 
-    def _pool(self, result: dict) -> str | None:
-        """Mark each candidate's pooled significance; return the effect found missing (or None)."""
-        low, high = POOLED_T_LIMITS
+    def _name(self, pool: PooledEvidence) -> tuple[str | None, str]:
+        """The effect the pool names missing (None: none) and, when it differs from the one named
+        before, why (the pooled evidence reversed)."""
+        ranked = sorted((n for n in pool.names[1:] if pool.significant(n)), key=lambda n: -pool.rank(n))
+        named, reversal = self._named, ""
+        if named is not None and pool.holds(named):
+            rival = next((n for n in ranked if n != named and pool.t_statistic(named, n) >= SIGNIFICANCE_T), None)
+            if rival is not None:
+                reversal = (
+                    f"named instead of {named}: the pooled evidence reversed, {rival}'s held-out error is "
+                    f"significantly below {named}'s (t {pool.t_statistic(named, rival):.1f})"
+                )
+                named = rival
+        elif ranked:
+            if named is not None:
+                reversal = (
+                    f"named instead of {named}: the pooled evidence reversed, {named} now removes "
+                    f"{100 * pool.improvement(named):.0f} % (t {pool.t_statistic(MODEL, named):.1f}), "
+                    "not significantly"
+                )
+            named = ranked[0]
+        else:
+            return None, ""
+        self._named = named
+        return named, reversal
+
+    @staticmethod
+    def _shares(pool: PooledEvidence, group: list[str]) -> str:
+        return ", ".join(f"{n} {100 * pool.improvement(n):.0f} %" for n in group)
+
+    @staticmethod
+    def _mark(result: dict, pool: PooledEvidence, found: str | None) -> None:
+        """Each candidate's pooled figures; ``significant`` becomes the pooled judgement (the effect
+        ``found`` missing: while the pool holds it), the window's own kept as
+        ``significant_in_window``; the candidates ranked by the pool, ``found`` first."""
         for candidate in result["candidates"]:
             name = candidate["effect"]
-            same = [next((c for c in h["candidates"] if c["effect"] == name), None) for h in self._history]
-            ts = [float(np.clip(c["t_statistic"] if c else 0.0, low, high)) for c in same]
-            gains = [c["improvement_yaw_rate"] if c else 0.0 for c in same]
-            pooled_t = sum(ts) / math.sqrt(len(ts))
             candidate["significant_in_window"] = candidate["significant"]
-            candidate["pooled_t"] = pooled_t
-            candidate["significant"] = bool(
-                candidate["significant"]
-                or (
-                    pooled_t >= SIGNIFICANCE_T
-                    and float(np.mean(gains)) >= MIN_IMPROVEMENT
-                    and candidate["improvement_yaw_rate"] > 0
-                    and candidate["training_gain"] >= MIN_TRAINING_GAIN
-                )
+            candidate["significant"] = name == found or pool.significant(name)
+            candidate["pooled"] = {
+                "improvement_yaw_rate": pool.improvement(name),
+                "t_statistic": pool.t_statistic(MODEL, name),
+                "training_gain": pool.training_gain(name),
+            }
+        result["candidates"].sort(key=lambda c: (c["effect"] != found, not c["significant"], -pool.rank(c["effect"])))
+
+    def _verdict_without(self, result: dict, pool: PooledEvidence, rests_on: str, ratio: float) -> None:
+        """The verdict when the pool names no effect: ``adequate`` when the pooled held-out error is
+        within ``NOISE_MARGIN`` of the noise floor and no parameter is pinned at a bound, else
+        ``unexplained`` with the pool's best candidate and what is missing to credit it."""
+        pinned = result.get("pinned", [])
+        if ratio <= NOISE_MARGIN and not pinned:
+            result["verdict"] = "adequate"
+            result["verdict_sentence"] = (
+                f"on the {rests_on} the held-out error is the sensors' noise ({ratio:.2f} times the floor): "
+                "nothing the catalogue knows is missing"
             )
-        result["candidates"].sort(key=lambda c: not c["significant"])  # stable: diagnose's order otherwise
-        top = result["candidates"][0] if result["candidates"] else None
-        return top["effect"] if top is not None and top["significant"] else None
+            return
+        result["verdict"] = "unexplained"
+        parts = [f"on the {rests_on} the held-out yaw-rate error is {ratio:.1f} times the noise floor"] + pinned
+        best = result["candidates"][0]["effect"] if result["candidates"] else None
+        if best is None:
+            tail = "; no catalogued effect is left to try"
+        else:
+            group = pool.equivalents(best) if pool.improvement(best) >= MIN_IMPROVEMENT else []
+            tail = (
+                f"; no catalogued effect removes it significantly (best: {best} removes "
+                f"{100 * pool.improvement(best):.0f} %, t {pool.t_statistic(MODEL, best):.1f}; significant takes "
+                f"{100 * MIN_IMPROVEMENT:.0f} % and t {SIGNIFICANCE_T:g}: more data, or a manoeuvre that excites "
+                "it, would tell"
+                + (f"; as good so far: {self._shares(pool, group)}; {separation([best, *group])}" if group else "")
+                + ")"
+            )
+        result["verdict_sentence"] = "; ".join(parts) + tail
 
     def _auto_add(self, result: dict, found: str | None, effects: tuple, config) -> tuple | None:
         """Add the effect named in ``auto_add_after`` consecutive diagnoses; judge one added before."""
         trial = self._trial
+        pool = self._pool
         if trial is not None and trial.effect in effects:
             trial.diagnoses += 1
-            error = result["held_out_error"]
-            if error <= (1.0 - MIN_IMPROVEMENT) * trial.error_before:
+            error = pool.error
+            at_noise = error <= NOISE_MARGIN * pool.noise_floor
+            if error <= (1.0 - MIN_IMPROVEMENT) * trial.error_before or at_noise:
                 self._trial = None
                 return self._announce(
                     result,
                     "kept",
                     trial.effect,
                     effects,
-                    f"{trial.effect} kept: the held-out yaw-rate error fell from "
-                    f"{math.degrees(trial.error_before):.3f} to {math.degrees(error):.3f} deg/s",
+                    f"{trial.effect} kept: the pooled held-out yaw-rate error fell from "
+                    f"{math.degrees(trial.error_before):.3f} to {math.degrees(error):.3f} deg/s "
+                    f"(noise floor {math.degrees(pool.noise_floor):.3f} deg/s)",
                 )
             if trial.diagnoses >= CHECK_DIAGNOSES:
                 self._trial = None
@@ -405,9 +729,9 @@ class OnlineDiagnosis:
                     "removed",
                     trial.effect,
                     kept,
-                    f"{trial.effect} removed again: the held-out yaw-rate error did not fall in "
+                    f"{trial.effect} removed again: the pooled held-out yaw-rate error did not fall in "
                     f"{trial.diagnoses} diagnoses ({math.degrees(trial.error_before):.3f} before, "
-                    f"{math.degrees(error):.3f} deg/s now)",
+                    f"{math.degrees(error):.3f} deg/s now, noise floor {math.degrees(pool.noise_floor):.3f})",
                 )
             return None
         if not config.auto_add_effects or found is None or found in self._rejected:
@@ -417,15 +741,16 @@ class OnlineDiagnosis:
         self._streak = (found, count)
         if count < config.auto_add_after:
             return None
-        self._trial = Trial(found, result["held_out_error"])
+        self._trial = Trial(found, pool.error)
         return self._announce(
             result,
             "added",
             found,
             effects + (found,),
             f"{found} added by auto_add_effects: named in {count} consecutive diagnoses; removed again "
-            f"unless the held-out yaw-rate error ({math.degrees(result['held_out_error']):.3f} deg/s) "
-            f"falls by {100 * MIN_IMPROVEMENT:.0f} % within {CHECK_DIAGNOSES} diagnoses",
+            f"unless the pooled held-out yaw-rate error ({math.degrees(pool.error):.3f} deg/s) falls by "
+            f"{100 * MIN_IMPROVEMENT:.0f} % or to within {NOISE_MARGIN:g} times the noise floor within "
+            f"{CHECK_DIAGNOSES} diagnoses",
         )
 
     def _announce(self, result: dict, action: str, effect: str, effects: tuple, sentence: str) -> tuple | None:

@@ -1,17 +1,19 @@
 """The diagnosis on board (online_diagnosis): the online core's window diagnosed on its schedule,
 on simulated trips with known hidden effects."""
 
+import copy
 import math
 import time
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from ship_ident.bench.peers import dataset_samples
 from ship_ident.online import OnlineIdentifier, run_schedule
 from ship_ident.online_config import OnlineConfig
-from ship_ident.online_diagnosis import DiagnosisWorker, OnlineDiagnosis, diagnose_window
-from ship_ident.simulator import simulate
+from ship_ident.online_diagnosis import DiagnosisWorker, OnlineDiagnosis, PooledEvidence, diagnose_window, slice_sums
+from ship_ident.simulator import Vessel, simulate
 
 SEED_EFFECTS = ("rudder_offset", "cubic_yaw")  # the seed001 vessel's own, and the node's default model
 
@@ -95,6 +97,7 @@ def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     after = before.changed(effects=with_gyro)
     diagnosis = OnlineDiagnosis()
     named = windows(gyro, 90.0, 3, SEED_EFFECTS)
+    named_again = copy.deepcopy(named)
     assert [diagnosis.finish(d, before) for d in named] == [None, None, with_gyro]
     assert named[-1]["auto_add"]["action"] == "added" and named[-1]["candidates"][0]["effect"] == "gyro_bias"
     useless = windows(wind, 120.0, 2, with_gyro, step=60.0)
@@ -102,8 +105,9 @@ def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     assert diagnosis.finish(useless[0], after) is None  # one diagnosis of grace
     assert diagnosis.finish(useless[1], after) == SEED_EFFECTS
     assert useless[1]["auto_add"]["action"] == "removed" and "did not fall" in useless[1]["auto_add"]["sentence"]
-    for d in named:  # named again: not added again
+    for d in named_again:  # named again: not added again
         assert diagnosis.finish(d, before) is None
+    assert named_again[-1]["verdict"] == "missing_effect" and "auto_add" not in named_again[-1]
 
 
 def test_a_window_that_cannot_support_a_diagnosis_is_skipped_with_the_reason():
@@ -118,20 +122,119 @@ def test_a_window_that_cannot_support_a_diagnosis_is_skipped_with_the_reason():
 
 
 @pytest.mark.slow
-def test_the_worker_diagnoses_in_a_child_process_one_at_a_time_within_its_cpu_budget():
+def test_the_worker_diagnoses_in_a_child_process_one_at_a_time():
     sim = simulate("random", effects=SEED_EFFECTS + ("gyro_bias",), duration=100.0, seed=3)
     worker = DiagnosisWorker()
     try:
-        worker.submit((sim.dataset, "nomoto2", SEED_EFFECTS, 100.0))
-        assert "still runs" in worker.refusal(100.0)
+        worker.submit((sim.dataset, "nomoto2", SEED_EFFECTS, 100.0, -math.inf))
+        assert worker.busy
         deadline = time.monotonic() + 120.0
         while (result := worker.poll()) is None and time.monotonic() < deadline:
             time.sleep(0.1)
+        assert not worker.busy
         assert result["status"] == "done" and result["candidates"][0]["effect"] == "gyro_bias"
         assert result["compute_seconds"] > 0
-        budget = result["compute_seconds"] / 0.1
-        assert "CPU budget" in worker.refusal(100.0 + 0.5 * budget)
-        assert worker.refusal(100.0 + budget + 0.01) is None
+        assert result["held_out_slice"]["seconds"] == pytest.approx(35.0, abs=0.2)  # all of it is fresh
     finally:
         worker.close()
     assert not math.isnan(result["held_out_error"])
+
+
+# --- the pooled evidence, on held-out errors drawn here --------------------------------------
+NOISE = math.radians(0.2)  # rad/s, the yaw-rate noise floor of the drawn errors
+SLICE = np.arange(600) * 0.1  # s, a minute of held-out samples at 10 Hz
+
+
+def swell(period: float, amplitude: float = 2.0) -> np.ndarray:
+    """A smooth yaw-rate error (rad/s) the model misses: ``amplitude`` noise levels, ``period`` s."""
+    return amplitude * NOISE * np.sin(2 * np.pi * SLICE / period)
+
+
+def drawn_diagnosis(stamp: float, missed, left: dict, rng) -> dict:
+    """A finished diagnosis of nomoto2 without effects whose held-out slice, a minute ending at
+    ``stamp`` (s), has the yaw-rate error ``missed`` (rad/s) beside the sensor noise (drawn here)
+    with the model, and ``left[name]`` with each candidate."""
+    noise = NOISE * rng.standard_normal(len(SLICE))
+    names = ["model", *left]
+    rows = [noise + missed] + [noise + left[name] for name in left]
+    piece = slice_sums(stamp - 60.0 + SLICE, 0.1, names, rows, [0.0] + [0.1] * len(left), NOISE)
+    return {
+        "stamp": stamp,
+        "status": "done",
+        "structure": {"model": "nomoto2", "effects": []},
+        "verdict": "unexplained",
+        "verdict_sentence": "",
+        "candidates": [{"effect": name, "significant": False, "evidence": "drawn"} for name in left],
+        "held_out_error": float(np.sqrt(np.mean(rows[0] ** 2))),
+        "noise_floor": NOISE,
+        "pinned": [],
+        "held_out_slice": piece,
+    }
+
+
+def test_a_slice_where_a_candidate_runs_as_the_model_adds_no_evidence_either_way():
+    rng = np.random.default_rng(1)
+    shows = drawn_diagnosis(60.0, swell(20.0), {"cubic_yaw": 0.0}, rng)["held_out_slice"]  # cubic_yaw removes it
+    quiet = drawn_diagnosis(120.0, 0.0, {"cubic_yaw": 0.0}, rng)["held_out_slice"]  # nothing to remove: alike
+    pool = PooledEvidence(shows["names"])
+    pool.add(shows)
+    t, share = pool.t_statistic("model", "cubic_yaw"), pool.improvement("cubic_yaw")
+    pool.add(quiet)
+    assert pool.t_statistic("model", "cubic_yaw") == pytest.approx(t)
+    assert t > 3 and pool.improvement("cubic_yaw") < share  # the share dilutes, the evidence stays
+    assert pool.seconds == pytest.approx(120.0)
+
+
+def test_the_named_effect_changes_only_when_the_pooled_evidence_reverses():
+    """cubic_yaw explains the first two minutes; quiet minutes keep it named (no evidence against
+    it); then minutes that quadratic_yaw explains and cubic_yaw does not: once they outweigh the
+    first, the pooled evidence reverses, quadratic_yaw is named, once, and the sentence says why."""
+    rng = np.random.default_rng(2)
+    config = OnlineConfig(effects=())
+    diagnosis = OnlineDiagnosis()
+    first, second = swell(20.0), swell(30.0)
+    plan = [(first, {"cubic_yaw": 0.0, "quadratic_yaw": 0.7 * first})] * 2
+    plan += [(0.0, {"cubic_yaw": 0.0, "quadratic_yaw": 0.0})] * 3
+    plan += [(second, {"cubic_yaw": second, "quadratic_yaw": 0.0})] * 6
+    results = []
+    for k, (missed, left) in enumerate(plan):
+        result = drawn_diagnosis(60.0 * (k + 1), missed, left, rng)
+        assert diagnosis.finish(result, config) is None  # auto-add is off
+        results.append(result)
+    names = [r["candidates"][0]["effect"] if r["verdict"] == "missing_effect" else None for r in results]
+    print(names, [r["verdict_sentence"] for r in results])
+    assert names[:5] == ["cubic_yaw"] * 5
+    switch = names.index("quadratic_yaw")
+    assert switch > 5 and set(names[switch:]) == {"quadratic_yaw"}
+    assert "pooled evidence reversed" in results[switch]["verdict_sentence"]
+    assert results[4]["verdict_sentence"].startswith("cubic_yaw is missing: on the 5.0 min of held-out data since")
+
+
+@pytest.mark.slow
+def test_a_quick_boat_whose_yaw_damping_grows_with_the_cube_of_the_turn_rate_is_named_once_and_fixed():
+    """A 15-minute trip of random rudder steps on a boat whose yaw damping has a cubic part (K
+    0.33 1/s, T1 8.7 s, T2 0.86 s, T3 2.1 s, alpha 17.8 s^2/rad^2), diagnosed every minute with
+    nomoto2 + rudder_offset: the tight turns that show the cubic damping come seldom, and a
+    window without them holds no evidence either way. Pooled since the start, cubic_yaw is named
+    (measured at 365 s, on 4.7 min of held-out data), never another effect; auto-add adds it after
+    three diagnoses and the next diagnosis' held-out error is at the noise floor."""
+    boat = Vessel(
+        "cubic damping",
+        "a quick boat whose yaw damping grows with the cube of the turn rate",
+        dict(K=0.33, T1=8.7, T2=0.86, T3=2.1, alpha=17.8),
+        speed=3.0,
+    )
+    sim = simulate("random", boat, effects=("cubic_yaw",), duration=900.0, seed=1)
+    config = OnlineConfig(effects=("rudder_offset",), diagnosis_period=60.0, auto_add_effects=True)
+    done = [d for _, d in diagnosed(sim, config) if d["status"] == "done"]
+    named = [d for d in done if d["verdict"] == "missing_effect"]
+    print([(d["stamp"], d["verdict"], d["verdict_sentence"][:80]) for d in done])
+    assert named and named[0]["stamp"] <= 600.0  # measured: 365 s
+    assert {d["candidates"][0]["effect"] for d in named} == {"cubic_yaw"}
+    assert "min of held-out data since the start" in named[0]["verdict_sentence"]
+    added = next(k for k, d in enumerate(done) if d.get("auto_add", {}).get("action") == "added")
+    assert done[added]["auto_add"]["effects"] == ["rudder_offset", "cubic_yaw"]
+    after = done[added + 1]
+    assert after["structure"]["effects"] == ["rudder_offset", "cubic_yaw"] and after["verdict"] != "missing_effect"
+    assert after["held_out_error"] <= 1.25 * after["noise_floor"]
+    assert after["pooled"]["since"] == "rudder_offset+cubic_yaw came into force"

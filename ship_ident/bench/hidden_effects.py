@@ -112,13 +112,15 @@ def strength(effect: str, vessel, rng: np.random.Generator, answer: Response) ->
     raise ValueError(f"no strength for {effect!r}")
 
 
-def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
-    """One case: simulate ``hidden`` on a vessel drawn from ``seed``, diagnose, check fairness."""
+def draw_case(seed: int, hidden: tuple[str, ...], duration: float | None = None, manoeuvres=MANOEUVRES):
+    """A vessel drawn from ``seed``, its manoeuvre (one of ``manoeuvres``) and its simulated record
+    of ``duration`` s (default ``DURATION_S`` of its kind) with ``hidden`` at a strength that
+    matters: (vessel, manoeuvre, simulation)."""
     rng = np.random.default_rng(seed)
     vessel = random_vessel(rng)
     kind = vessel.name.split("(")[0]
-    manoeuvre = str(rng.choice(MANOEUVRES))
-    duration, sample_time = DURATION_S[kind], SAMPLE_TIME_S[kind]
+    manoeuvre = str(rng.choice(manoeuvres))
+    duration, sample_time = duration or DURATION_S[kind], SAMPLE_TIME_S[kind]
     answer = response(manoeuvre, vessel, duration, sample_time, seed)
     truth = {}
     for effect in hidden:
@@ -132,6 +134,43 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
         sample_time=sample_time,
         seed=seed,
     )
+    return vessel, manoeuvre, sim
+
+
+def true_improvement(result, hidden: tuple[str, ...], truth: dict) -> float:
+    """Share of the held-out free-run error of ``result`` (a ``diagnose.Diagnosis``) that the true
+    structure at its known parameters ``truth`` removes (the larger of heading and yaw rate): a
+    case's fairness judged without the code under test."""
+    run = free_run(result.structure.with_effects(result.structure.effect_names + tuple(hidden)), truth, result.held_out)
+    return max(
+        _improvement(result.run.fit["rmse_heading"], run.fit["rmse_heading"]),
+        _improvement(result.run.fit["rmse_yaw_rate"], run.fit["rmse_yaw_rate"]),
+    )
+
+
+def fitted_true_improvement(result, hidden: tuple[str, ...]) -> float:
+    """Share of the held-out free-run error of ``result`` (a ``diagnose.Diagnosis``) that an
+    output-error fit of the true structure removes (the larger of heading and yaw rate), started
+    as a candidate is: from the diagnosed model with the effects neutral and the effects' starts."""
+    base = result.estimate.parameters
+    true_structure = result.structure.with_effects(result.structure.effect_names + tuple(hidden))
+    true_fit = no_worse(
+        _fit(true_structure, result.training, DEFAULT_METHOD, base),
+        result.training,
+        DEFAULT_METHOD,
+        base,
+        result.training_windows,
+    )
+    true_run = free_run(true_fit.structure, true_fit.parameters, result.held_out)
+    return max(
+        _improvement(result.run.fit["rmse_heading"], true_run.fit["rmse_heading"]),
+        _improvement(result.run.fit["rmse_yaw_rate"], true_run.fit["rmse_yaw_rate"]),
+    )
+
+
+def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
+    """One case: simulate ``hidden`` on a vessel drawn from ``seed``, diagnose, check fairness."""
+    vessel, manoeuvre, sim = draw_case(seed, hidden)
     result = diagnose(sim.dataset, "nomoto2", (), workers=1)
     top = result.candidates[0]
     row = {
@@ -144,25 +183,8 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
         "top_improvement": top.improvement,
     }
     if hidden:
-        base = result.estimate.parameters
-        true_fit = no_worse(
-            _fit(Structure("nomoto2", hidden), result.training, DEFAULT_METHOD, base),
-            result.training,
-            DEFAULT_METHOD,
-            base,
-            result.training_windows,
-        )
-        true_run = free_run(true_fit.structure, true_fit.parameters, result.held_out)
-        row["fitted_true_improvement"] = max(
-            _improvement(result.run.fit["rmse_heading"], true_run.fit["rmse_heading"]),
-            _improvement(result.run.fit["rmse_yaw_rate"], true_run.fit["rmse_yaw_rate"]),
-        )
-        # fairness without the code under test: the true model at its known parameters
-        known_run = free_run(Structure("nomoto2", hidden), sim.truth, result.held_out)
-        row["true_improvement"] = max(
-            _improvement(result.run.fit["rmse_heading"], known_run.fit["rmse_heading"]),
-            _improvement(result.run.fit["rmse_yaw_rate"], known_run.fit["rmse_yaw_rate"]),
-        )
+        row["fitted_true_improvement"] = fitted_true_improvement(result, hidden)
+        row["true_improvement"] = true_improvement(result, hidden, sim.truth)
         row["fair"] = bool(row["true_improvement"] >= FAIR_SHARE)
         pair = top.near_equivalent if len(top.near_equivalent) == 1 else []  # several: no naming
         named = [c for c in result.candidates if c.effect in hidden and c.effect in (top.effect, *pair)]

@@ -575,12 +575,8 @@ def parameter_warnings(estimate: Estimate) -> list[dict]:
     for name in structure.free_names:
         p = structure.parameter(name)
         value, std = estimate.parameters[name], estimate.std_errors.get(name, np.inf)
-        tol = 1e-4 * max(1.0, abs(value))
-        pinned = [
-            (b, side)
-            for b, side in ((p.lower, "lower"), (p.upper, "upper"))
-            if np.isfinite(b) and abs(value - b) <= tol
-        ]
+        reached = p.bound_reached(value)
+        pinned = [(b, side) for b, side in ((p.lower, "lower"), (p.upper, "upper")) if b == reached]
         for bound, side in pinned:
             hint = {
                 ("T3", "lower"): " (a rudder delay looks like this)",

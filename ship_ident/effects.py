@@ -24,6 +24,29 @@ import numpy as np
 
 from .integrate import TRIG_COS, TRIG_NONE, TRIG_SIN
 
+BOUND_SHARE = 0.01  # a parameter within 1 % of a physical bound is on it (Parameter.bound_reached)
+
+
+def on_bound(value: float, bound: float) -> bool:
+    """Whether ``value`` sits on the finite ``bound``.
+
+    Within ``BOUND_SHARE`` of the bound (plus 1e-6 in the parameter's SI unit, for a bound at or
+    near zero) is on it: a bounded search that runs off along a ridge of the cost (T1 -> infinity
+    with K and alpha, for a window no model fits) stops within a fraction of a percent of the bound
+    it was running to, not exactly on it.
+
+    Parameters
+    ----------
+    value, bound : float
+        A parameter's value and one of its bounds, in its SI unit.
+
+    Returns
+    -------
+    bool
+        True when the value is on the bound; False for an infinite bound.
+    """
+    return bool(np.isfinite(bound) and abs(value - bound) <= BOUND_SHARE * abs(bound) + 1e-6 * max(1.0, abs(bound)))
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -37,6 +60,23 @@ class Parameter:
     upper: float = np.inf
     display_unit: str = ""  # e.g. "deg" for angles shown to people
     display_scale: float = 1.0  # SI value * display_scale = display value
+
+    def bound_reached(self, value: float) -> float | None:
+        """The physical bound ``value`` sits on, or None.
+
+        See ``on_bound`` for the tolerance.
+
+        Parameters
+        ----------
+        value : float
+            The parameter's value, in its SI unit.
+
+        Returns
+        -------
+        float or None
+            The lower or upper bound reached, None when the value is inside both.
+        """
+        return next((float(b) for b in (self.lower, self.upper) if on_bound(value, b)), None)
 
 
 @dataclass(frozen=True)
@@ -480,7 +520,7 @@ class CourseInstability(Effect):
     def evidence(self, context):
         s = context.signals
         c = _partial_corr(context.equation_residual, s.r, [s.delta])
-        pinned = max(context.parameters.get("T", 0.0), context.parameters.get("T1", 0.0)) >= 0.999 * T_UPPER_BOUND
+        pinned = any(on_bound(context.parameters.get(name, 0.0), T_UPPER_BOUND) for name in ("T", "T1"))
         note = (
             "; the time constant sits on its upper bound, which is what course instability looks like" if pinned else ""
         )

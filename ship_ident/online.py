@@ -775,9 +775,9 @@ def _on_bound(structure: Structure, params: dict) -> str:
     found = []
     for name in structure.free_names:
         parameter, value = structure.parameter(name), params[name]
-        for bound in (parameter.lower, parameter.upper):
-            if bound != 0 and math.isfinite(bound) and abs(value - bound) <= 1e-3 * abs(bound):
-                found.append(f"{name} = {value:.4g} {parameter.unit} on its bound {bound:g}")
+        bound = parameter.bound_reached(value)
+        if bound is not None and bound != 0:
+            found.append(f"{name} = {value:.4g} {parameter.unit} on its bound {bound:g}")
     return ", ".join(found)
 
 

@@ -58,6 +58,7 @@ import numpy as np
 from scipy import sparse
 
 from ..dataset import Dataset, cut_segments
+from ..effects import BOUND_SHARE
 from ..noise import robust_std
 from ..structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
@@ -67,8 +68,6 @@ CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this e
 MIN_INTERVAL_SAMPLES = 50  # shorter intervals are not split further
 VALLEY_SHARES = (0.03, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the starts along the T2 = T3 valley (nomoto2)
 VALLEY_HELD_ITERATIONS = 8  # search iterations at each of them with T2 held
-AT_BOUND_SHARE = 0.01  # within 1 % of a bound's value is on it (T1 = 999 s of 1000 s: a search
-# running off along the K, T1, alpha -> infinity ridge, not a hull)
 RESCUE_ITERATIONS_FACTOR = 2  # a search not converged in max_iterations goes on this many times longer
 RESCUE_MAX_COST = 4.0  # ... when its mean squared residual is within this many noise variances
 SHOOTING_SPAN = 3.0  # main time constants per shooting interval at least (``shooting_length``)
@@ -582,14 +581,8 @@ class OutputError(Estimator):
             and not f.startswith("at_bound:")
             and f not in ("complex_time_constants", "diverged")
         ]  # the start's, not this fit's
-        physical = structure.bounds(names)  # the data's stability limit of alpha is no physical bound
-        at_bound = [
-            n
-            for n, v, lo, hi in zip(names, result.x, *physical)
-            if any(
-                np.isfinite(b) and np.isclose(v, b, rtol=AT_BOUND_SHARE, atol=1e-6 * max(1, abs(b))) for b in (lo, hi)
-            )
-        ]
+        # the physical bounds: the data's stability limit of alpha is no physical bound
+        at_bound = [n for n, v in zip(names, result.x) if structure.parameter(n).bound_reached(v) is not None]
         flags += [f"at_bound:{n}" for n in at_bound]
         if not result.success:
             flags.append("oe_not_converged")
@@ -597,7 +590,7 @@ class OutputError(Estimator):
             params["T1"], params["T2"] = params["T2"], params["T1"]
             std_errors["T1"], std_errors["T2"] = std_errors["T2"], std_errors["T1"]
             cumulative["T1"], cumulative["T2"] = cumulative["T2"], cumulative["T1"]
-        if "T2" in names and np.isclose(params["T1"], params["T2"], rtol=AT_BOUND_SHARE):
+        if "T2" in names and np.isclose(params["T1"], params["T2"], rtol=BOUND_SHARE):
             # the poles met: the search sits on the fold T1 = T2 of the symmetric pair, at the edge
             # of real time constants; their sum and product are determined there, neither alone
             # (a hull whose rudder lead exceeds its main time constant lands there)

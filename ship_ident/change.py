@@ -50,6 +50,7 @@ from dataclasses import replace
 import numpy as np
 
 from .dataset import Dataset, cut_segments
+from .effects import yaw_time_constant
 from .estimators.base import scaled_inverse
 from .metrics import effective_sample_fraction
 from .noise import SENSOR_RESOLUTION
@@ -386,7 +387,7 @@ def locate_change(structure: Structure, params: dict, dataset: Dataset, split: i
     def pieces(a: int, b: int) -> tuple:
         return tuple((c, min(c + n, b)) for c in range(a, b, n) if min(c + n, b) - c >= 2)
 
-    span = GAIN_FIT_SPAN * params.get("T1", params.get("T", 0.0)) / dataset.sample_time
+    span = GAIN_FIT_SPAN * yaw_time_constant(params) / dataset.sample_time
 
     def fitted_cost(blocks: tuple, names: tuple) -> float:
         # K alone is a point of the model with K and T1 (T1 held at the reference's): where the

@@ -300,11 +300,6 @@ def windows(dataset: Dataset, length_s: float) -> Dataset:
     return replace(dataset, segments=cut_segments(dataset.segments, step, min_samples=2))
 
 
-def time_constant(parameters: dict) -> float:
-    """Dominant yaw time constant (s) of a parameter set in either form (``yaw_time_constant``)."""
-    return yaw_time_constant(parameters)
-
-
 def held_out_window(parameters: dict, held_out_s: float) -> float:
     """Length (s) of the held-out free-run windows: ``HELD_OUT_WINDOW_TIME_CONSTANTS`` yaw time
     constants, but short enough for ``HELD_OUT_MIN_WINDOWS`` windows in the longest held-out
@@ -314,7 +309,7 @@ def held_out_window(parameters: dict, held_out_s: float) -> float:
     and one run is one sample for the significance test: its verdict would hang on that run
     (on KVLCC2's 10/10 zigzag the verdict flipped with the resampling step).
     """
-    window = HELD_OUT_WINDOW_TIME_CONSTANTS * time_constant(parameters)
+    window = HELD_OUT_WINDOW_TIME_CONSTANTS * yaw_time_constant(parameters)
     return float(max(HELD_OUT_WINDOW_MIN_S, min(window, held_out_s / HELD_OUT_MIN_WINDOWS)))
 
 
@@ -1020,7 +1015,7 @@ def diagnose(
     candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
     mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
-    tc = time_constant(estimate.parameters)
+    tc = yaw_time_constant(estimate.parameters)
     worst_window = float(np.clip(WORST_WINDOW_TIME_CONSTANTS * tc, *WORST_WINDOW_LIMITS_S))
     if validation is None:
         source = dataset.meta.get("source") or "the record"

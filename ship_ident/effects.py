@@ -129,8 +129,25 @@ T_UPPER_BOUND = 1e3  # s, the base models' upper bound on T and T1 (structure.BA
 
 
 def yaw_time_constant(params: dict) -> float:
-    """The hull's dominant yaw time constant (s) in either form: T, T1 + T2, or the slow pole's
-    time of the acceleration form (1 / |a1|), at most ``T_UPPER_BOUND``."""
+    """The hull's main yaw time constant (s), the one every time scale of the fits is drawn from.
+
+    T, T1 + T2, or the acceleration form's 1 / |a1| (T1 + T2 when it is stable; the time a
+    course-unstable turn takes to grow by e when not), at most ``T_UPPER_BOUND``. T1 + T2 rather
+    than T1: it is the mean delay (first moment) of the yaw rate's impulse response
+    1 / ((1 + T1 s)(1 + T2 s)), how long a yaw rate, and the information in an initial state, lasts;
+    it is the coefficient of r' (1 / a1 in the acceleration form, where T1 alone needs the roots),
+    and it stays smooth where T1 and T2 meet and trade places.
+
+    Parameters
+    ----------
+    params : dict
+        A parameter set of any model form (s, 1/s).
+
+    Returns
+    -------
+    float
+        The time constant (s); 1 s for a set without any.
+    """
     if "T" in params:
         return float(params["T"])
     if "T1" in params:

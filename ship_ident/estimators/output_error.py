@@ -58,7 +58,7 @@ import numpy as np
 from scipy import sparse
 
 from ..dataset import Dataset, cut_segments
-from ..effects import BOUND_SHARE
+from ..effects import BOUND_SHARE, yaw_time_constant
 from ..noise import robust_std
 from ..structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
@@ -70,7 +70,7 @@ VALLEY_SHARES = (0.03, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the starts along the T
 VALLEY_HELD_ITERATIONS = 8  # search iterations at each of them with T2 held
 RESCUE_ITERATIONS_FACTOR = 2  # a search not converged in max_iterations goes on this many times longer
 RESCUE_MAX_COST = 4.0  # ... when its mean squared residual is within this many noise variances
-SHOOTING_SPAN = 3.0  # main time constants per shooting interval at least (``shooting_length``)
+SHOOTING_SPAN = 3.0  # yaw time constants per shooting interval at least (``shooting_length``)
 RESHOOT_RATIO = 1.5  # a fit whose hull wants intervals this much longer than it used is searched again on them
 SPARSE_INTERVALS = 12  # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
 TIME_CONSTANT_STARTS = (1.0, 3.0, 10.0, 30.0, 100.0)  # s, main time constants also started from
@@ -278,7 +278,7 @@ class OutputError(Estimator):
 
     def shooting_length(self, dataset: Dataset, params: dict) -> float:
         """Seconds per shooting interval for a hull near ``params``: ``shooting_s``, or
-        SHOOTING_SPAN main time constants when longer (``explore`` fits; the diagnosis's figures
+        SHOOTING_SPAN yaw time constants (``yaw_time_constant``) when longer (``explore`` fits; the diagnosis's figures
         were measured on fixed intervals), but no longer than the rudder-noise walk
         time s_psi^2 / ((K s_delta)^2 h) (``walk_limited``), where the heading drift the free run
         accumulates from the rudder's noise reaches the heading noise (30 s on seed 001's hull).
@@ -286,7 +286,9 @@ class OutputError(Estimator):
         ship's K (T1 66 s, prediction error) scattered 1.3 % RMS over noise seeds on 120 s
         intervals, 8.8 % on 50 s ones, 0.4 % on 200 s ones, at its standard error."""
         length = self.shooting_s
-        main = abs(params.get("T1", params.get("T", 0.0)))
+        if "K" not in params:  # the acceleration form: a course-unstable hull's free run grows as
+            return length  # exp(|a1| t), and intervals of several of its times would diverge
+        main = yaw_time_constant(params)
         if self.shooting_span * main > length:
             length = self.shooting_span * main
             if self.walk_limited:

@@ -51,7 +51,7 @@ import numpy as np
 
 from .dataset import Dataset, cut_segments
 from .effects import yaw_time_constant
-from .estimators.base import scaled_inverse
+from .estimators.base import REFERENCE_RELATIVE_ERRORS, scaled_inverse
 from .metrics import effective_sample_fraction
 from .noise import SENSOR_RESOLUTION
 from .structure import Structure
@@ -61,11 +61,6 @@ SHORT_RATIO_FACTOR = 4.0  # the newest refit period's error must exceed this man
 MIN_SHORT_SAMPLES = 20  # the short test's newest samples: at least this many (a median of 20)
 MEDIAN_OF_CHI2_1 = 0.4549  # median of e^2 / sigma^2 for Gaussian e
 MIN_LEVEL = SENSOR_RESOLUTION**2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
-# A reference model must be well determined, its gain as well as an OK estimate's: a loosely known K
-# travels with a cubic damping far off, which mispredicts the next turns of the same hull (a false
-# change), or with a window straddling a change, bent towards the new hull. T1 may be looser: steady
-# turns determine K to 0.2 % but T1 only to 8-20 %, and such a reference still finds a change.
-REFERENCE_RELATIVE_ERRORS = {"K": 0.03, "T": 0.2, "T1": 0.2}
 # The gain test: a newest block mispredicted by more than GAIN_TEST_RATIO (below ``ratio``) also votes
 # for a change when K refitted on it moves by more than GAIN_TEST_SHIFT and GAIN_TEST_STANDARD_ERRORS
 # (a loaded hull in a steady turn, its yaw rate 30 % low, shows only 4-6x its usual error in noisy

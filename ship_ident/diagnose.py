@@ -52,6 +52,7 @@ import numpy as np
 from .dataset import DataError, Dataset, cut_segments
 from .effects import EFFECTS, Evidence, StartContext, heading_harmonics, yaw_time_constant
 from .estimators import Estimate, make_estimator, regression_method
+from .estimators.base import Z_95
 from .integrate import forcing as yaw_forcing
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
 from .signals import Signals, compute_signals
@@ -536,7 +537,7 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
     residual, rudder = residual[ok], held_out.rudder[ok]
     n = len(residual)
     max_lag = max(1, min(int(round(CORRELATION_LAG_S / held_out.sample_time)), n // 4))
-    bound = 1.96 / np.sqrt(max(n, 1))
+    bound = Z_95 / np.sqrt(max(n, 1))
     lags, auto = correlation(residual, residual, max_lag)
     _, cross = correlation(rudder, residual, max_lag)
     positive = lags > 0

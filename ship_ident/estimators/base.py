@@ -31,10 +31,51 @@ Z_95 = 1.96  # two-sided 95 % point of the normal distribution
 MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite the hull
 MIN_YAW_RATE_STD = np.radians(0.02)  # rad/s: an absolute floor under the noise-relative need
 HARDLY_MOVES_SNR = 2.0  # yaw-rate std below this many noise levels: it hardly moves
-# Relative standard errors (std / |value|) above which a window does not determine a parameter.
-# The acceleration form's gain b (b0) likewise; its linear damping a1 may be near zero
-# (a marginally stable hull), where no relative error is small: the window is judged by the others.
-MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3, "b": 0.1, "b0": 0.1}
+# Relative standard errors (std / |value|) of the gain and the main time constant that three
+# decisions accept, side by side. The parameters that play each role, in every model form: the
+# gain K, the time constant T (T1), and in the acceleration form (a hull whose linear yaw damping is
+# weak or negative) the rudder's yaw acceleration b (b0) for K and the damping a1 for the time
+# constant. A limit of None leaves the role out of the decision.
+RELATIVE_ERROR_ROLES = (("K",), ("T", "T1"), ("b", "b0"), ("a1",))
+RELATIVE_ERROR_POLICIES = {
+    #                 K     T, T1  b, b0  a1
+    # a window that misses these does not determine the hull (its estimate is refused); a1 may be
+    # near zero (a marginally stable hull), where no relative error is small: judged by the others
+    "determined": (0.1, 0.3, 0.1, None),
+    # a new online estimate is trusted (OK) within these: a 10 % error is then 3 (K) or 2.5 (T1)
+    # standard errors away; a looser one that is determined is published as uncertain (WARN)
+    "trusted": (0.03, 0.04, 0.03, 0.1),
+    # the change detector's reference: a loosely known K travels with a cubic damping far off,
+    # which mispredicts the next turns of the same hull (a false change); T1 may be looser: steady
+    # turns determine K to 0.2 % but T1 only to 8-20 %, and such a reference still finds a change
+    "reference": (0.03, 0.2, None, None),
+}
+
+
+def relative_error_limits(policy: str) -> dict:
+    """The relative standard error limits of a decision, per parameter name.
+
+    Parameters
+    ----------
+    policy : str
+        A key of ``RELATIVE_ERROR_POLICIES``: "determined", "trusted" or "reference".
+
+    Returns
+    -------
+    dict
+        Parameter name -> largest accepted std / |value| (dimensionless).
+    """
+    return {
+        name: limit
+        for names, limit in zip(RELATIVE_ERROR_ROLES, RELATIVE_ERROR_POLICIES[policy])
+        if limit is not None
+        for name in names
+    }
+
+
+MAX_RELATIVE_ERRORS = relative_error_limits("determined")
+TRUSTED_RELATIVE_ERRORS = relative_error_limits("trusted")
+REFERENCE_RELATIVE_ERRORS = relative_error_limits("reference")
 
 
 @dataclass

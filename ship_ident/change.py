@@ -82,19 +82,6 @@ LOCATION_STEP = 0.5  # s between candidate change times (a coarse pass at four t
 LOCATION_TOLERANCE = 3.84
 
 
-def covering_blocks(dataset: Dataset, n: int) -> tuple:
-    """Half-open index ranges of blocks of n samples covering the dataset's segments, in time order,
-    each segment's blocks counted back from its end (its first block may be shorter; blocks of one
-    sample are left out): the newest block, where a changed vessel shows first, is a whole one (cut
-    from the start, 30.5 s after a change left a newest block of 0.5 s, too short to show it)."""
-    return tuple(
-        (max(b - n, start), b)
-        for start, stop in dataset.segments
-        for b in reversed(range(stop, start, -n))
-        if b - max(b - n, start) >= 2
-    )
-
-
 def block_squared_errors(structure: Structure, params: dict, dataset: Dataset, blocks: tuple, lead: int = 0) -> list:
     """Squared free-run yaw-rate errors (rad^2/s^2) over each of ``blocks`` (half-open index ranges
     inside the segments), the model run free from the measured state ``lead`` samples before each
@@ -155,8 +142,8 @@ class ChangeDetector:
         ):
             return
         n = int(round(self.length / dataset.sample_time))
-        blocks = cut_segments(dataset.segments, n, whole=True) + cut_segments(
-            dataset.segments, n, whole=True, offset=n // 2
+        blocks = cut_segments(dataset.segments, n, align="start", whole=True) + cut_segments(
+            dataset.segments, n, align="start", offset=n // 2, whole=True
         )
         errors = block_errors(structure, params, dataset, blocks, lead=n)
         if len(errors):
@@ -379,8 +366,8 @@ def locate_change(structure: Structure, params: dict, dataset: Dataset, split: i
     first = max(start, split - n)
     origin = max(start, first - n)  # the side before the candidate starts here
 
-    def pieces(a: int, b: int) -> tuple:
-        return tuple((c, min(c + n, b)) for c in range(a, b, n) if min(c + n, b) - c >= 2)
+    def pieces(a: int, b: int) -> tuple:  # blocks of n samples from a to b, the last one shorter
+        return cut_segments(((a, b),), n, min_samples=2, align="start")
 
     span = GAIN_FIT_SPAN * yaw_time_constant(params) / dataset.sample_time
 

@@ -19,19 +19,55 @@ class DataError(ValueError):
     """Input data that cannot be used; the message says what is wrong and what to do."""
 
 
-def cut_segments(segments, samples: int, min_samples: int = 1, whole: bool = False, offset: int = 0) -> tuple:
-    """Half-open index ranges that cut each segment ``[a, b)`` into pieces of about ``samples``:
-    near-equal pieces covering the segment (a short segment is one piece), those shorter than
-    ``min_samples`` dropped; or, ``whole``, pieces of exactly ``samples`` from ``offset`` into the
-    segment, the remainder dropped. Free runs, shooting intervals and test blocks never cross a gap."""
+CUT_ALIGNMENTS = ("even", "start", "end")
+
+
+def cut_segments(
+    segments, samples: int, min_samples: int = 1, align: str = "even", offset: int = 0, whole: bool = False
+) -> tuple:
+    """Cut each segment into pieces of about ``samples``; no piece crosses a gap.
+
+    Free runs, shooting intervals and test blocks are all cut here.
+
+    Parameters
+    ----------
+    segments : sequence of (int, int)
+        Half-open sample index ranges ``[a, b)`` of contiguous data.
+    samples : int
+        Samples per piece.
+    min_samples : int
+        Pieces shorter than this are dropped.
+    align : {"even", "start", "end"}
+        "even": near-equal pieces covering the segment (a short segment is one piece); "start":
+        pieces of exactly ``samples`` from ``offset`` samples into the segment, the last one
+        shorter; "end": pieces of exactly ``samples`` counted back from the segment's end, the first
+        one shorter (the newest piece, where a changed hull shows first, is a whole one: cut from the
+        start, 30.5 s after a change would leave a newest piece of 0.5 s, too short to show it).
+    offset : int
+        Samples skipped at each segment's start ("start" only).
+    whole : bool
+        Drop the shorter piece: every piece has exactly ``samples`` (with "start" or "end").
+
+    Returns
+    -------
+    tuple of (int, int)
+        The pieces' half-open index ranges, in time order.
+    """
+    if align not in CUT_ALIGNMENTS:
+        raise ValueError(f"align must be one of {', '.join(CUT_ALIGNMENTS)}, not {align!r}")
+    if whole:
+        min_samples = max(min_samples, samples)
     out = []
     for a, b in segments:
-        if whole:
-            out += [(s, s + samples) for s in range(a + offset, b - samples + 1, samples)]
-            continue
-        pieces = max(1, int(round((b - a) / samples)))
-        edges = np.linspace(a, b, pieces + 1).round().astype(int)
-        out += [(int(lo), int(hi)) for lo, hi in zip(edges[:-1], edges[1:]) if hi - lo >= min_samples]
+        if align == "even":
+            count = max(1, int(round((b - a) / samples)))
+            edges = [int(e) for e in np.linspace(a, b, count + 1).round()]
+            pieces = zip(edges[:-1], edges[1:])
+        elif align == "start":
+            pieces = ((s, min(s + samples, b)) for s in range(a + offset, b, samples))
+        else:
+            pieces = ((max(e - samples, a), e) for e in reversed(range(b, a, -samples)))
+        out += [(lo, hi) for lo, hi in pieces if hi - lo >= min_samples]
     return tuple(out)
 
 

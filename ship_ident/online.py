@@ -33,11 +33,10 @@ from .change import (
     GAIN_FIT_SPAN,
     ChangeDetector,
     block_errors,
-    covering_blocks,
     fit_gain,
     with_held_errors,
 )
-from .dataset import DataError, Dataset, resample_series
+from .dataset import DataError, Dataset, cut_segments, resample_series
 from .effects import yaw_time_constant
 from .estimators import make_estimator
 from .estimators.base import (
@@ -600,7 +599,8 @@ class OnlineIdentifier:
         if dataset.duration < GAIN_FIT_SPAN * time_constant:
             return
         block = max(config.change_test_length, GAIN_BLOCK_SPAN * time_constant)
-        blocks = covering_blocks(dataset, int(round(block / dataset.sample_time)))
+        # blocks counted back from the end: the newest, where a changed hull shows first, is a whole one
+        blocks = cut_segments(dataset.segments, int(round(block / dataset.sample_time)), min_samples=2, align="end")
         try:
             for names in GAIN_FITS:  # the most the new data determine (judged by the standard errors alone:
                 # a rudder held in a turn determines K, r = K delta, however little it moves)
@@ -666,7 +666,7 @@ class OnlineIdentifier:
         if last_good is None or last_good.structure.label() != structure.label():
             return None
         n = int(round(config.change_test_length / dataset.sample_time))
-        blocks = covering_blocks(dataset, n)
+        blocks = cut_segments(dataset.segments, n, min_samples=2, align="end")
         new_blocks, old_blocks = (
             block_errors(structure, p, dataset, blocks, lead=n) for p in (estimate.parameters, last_good.parameters)
         )

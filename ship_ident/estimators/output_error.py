@@ -62,6 +62,7 @@ from ..effects import BOUND_SHARE, yaw_time_constant
 from ..noise import robust_std
 from ..structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
+from .shooting import ShootingProblem
 
 MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
@@ -391,18 +392,9 @@ class OutputError(Estimator):
         hull = dict(params0, **starts[0]) if starts else params0  # a given start knows the hull best
         shooting_s = self.shooting_length(dataset, hull)  # each interval restarts from its own fitted state
         intervals = shooting_intervals(dataset.segments, int(round(shooting_s / h)))
-        shots = replace(dataset, segments=intervals)
-        n_state = 3 if structure.order == 2 else 2
-        bias0 = structure.yaw_rate_bias(params0)
-        states0 = np.array([[dataset.heading[a], dataset.yaw_rate[a] - bias0, 0.0][:n_state] for a, _ in intervals])
-        fixed = {n: params0[n] for n in structure.fixed_names}
-
-        def unpack(x):
-            params = dict(fixed)
-            params.update(zip(names, x[:p]))
-            states = x[p:].reshape(-1, n_state)
-            initial = [(s[0], s[1], s[2] if n_state == 3 else 0.0) for s in states]
-            return params, initial
+        problem = ShootingProblem(structure, dataset, intervals, names, {n: params0[n] for n in structure.fixed_names})
+        n_state, unpack = problem.n_state, problem.unpack
+        states0 = problem.initial_states(structure.yaw_rate_bias(params0))
 
         simulations = 0
         robust = np.ones(2 * dataset.n_samples)  # Huber weights (square roots), fixed at the start
@@ -412,8 +404,7 @@ class OutputError(Estimator):
             ``weighs``: each point's own weighting (default: the search's)."""
             nonlocal simulations
             simulations += len(points)
-            runs = [unpack(x) for x in points]
-            psi, r = structure.simulate_runs([q for q, _ in runs], shots, [i for _, i in runs], substeps)
+            psi, r = problem.simulate(points, substeps)
             out = np.full((len(points), 2 * dataset.n_samples), 1e6)
             for k in range(len(points)):
                 psi_err, r_err = psi[k] - dataset.heading, r[k] - dataset.yaw_rate
@@ -424,38 +415,14 @@ class OutputError(Estimator):
         def residual(x):
             return residuals([x], fit_substeps(h, unpack(x)[0]))[0]
 
-        owner = np.zeros(dataset.n_samples, dtype=np.int64)  # shooting interval of each sample
-        for i, (a, b) in enumerate(intervals):
-            owner[a:b] = i
-        columns = np.empty((2 * dataset.n_samples, p + n_state), dtype=np.int64)  # of J's nonzeros
-        columns[:, :p] = np.arange(p)
-        columns[:, p:] = p + n_state * np.concatenate([owner, owner])[:, None] + np.arange(n_state)
+        columns = problem.columns(np.concatenate([problem.owner, problem.owner]))  # rows: heading, yaw rate
 
         def jacobian(x, f0, chosen=tuple(range(p))):
-            """Forward differences, all simulated in one call at the substeps of ``x``: one run per
-            parameter (of ``chosen``; the others' columns are zero), one per state component (the
-            intervals' states touch disjoint rows)."""
-            steps = 1e-6 * np.maximum(np.abs(x), 1e-2)
-            points = []
-            for j in chosen:
-                xs = x.copy()
-                xs[j] += steps[j] if x[j] + steps[j] <= upper[j] else -steps[j]
-                points.append(xs)
-            for c in range(n_state):
-                xs = x.copy()
-                xs[p + c :: n_state] += steps[p + c :: n_state]
-                points.append(xs)
+            """Forward differences (``ShootingProblem``), all simulated in one call at the substeps
+            of ``x``; the columns of the parameters not ``chosen`` are zero."""
+            points, steps = problem.difference_points(x, upper, chosen)
             diff = residuals(points, fit_substeps(h, unpack(x)[0])) - f0
-            values = np.zeros(columns.shape)
-            m, varied = len(chosen), list(chosen)
-            values[:, varied] = (diff[:m] / (np.array(points)[:, varied].diagonal() - x[varied])[:, None]).T
-            values[:, p:] = diff[m:].T / steps[columns[:, p:]]
-            if len(intervals) > SPARSE_INTERVALS:
-                row_starts = np.arange(0, values.size + 1, p + n_state)
-                return sparse.csr_matrix((values.ravel(), columns.ravel(), row_starts), shape=(len(f0), len(x)))
-            J = np.zeros((len(f0), len(x)))
-            np.put_along_axis(J, columns, values, axis=1)
-            return J
+            return problem.jacobian(x, points, steps, diff, chosen, columns, len(intervals) > SPARSE_INTERVALS)
 
         lo = np.concatenate([lower, np.full(states0.size, -np.inf)])
         hi = np.concatenate([upper, np.full(states0.size, np.inf)])

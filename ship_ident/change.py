@@ -52,6 +52,7 @@ import numpy as np
 from .dataset import Dataset, cut_segments
 from .effects import yaw_time_constant
 from .estimators.base import REFERENCE_RELATIVE_ERRORS, scaled_inverse
+from .estimators.shooting import ShootingProblem
 from .metrics import effective_sample_fraction
 from .noise import SENSOR_RESOLUTION
 from .structure import Structure
@@ -286,50 +287,27 @@ def fit_gain_and_cost(
     """``fit_gain``, with the sum of squared errors of the fitted free runs (yaw rate and heading, each
     over its noise std; dimensionless) last."""
     names = [n for n in names if n in params]
-    dataset = replace(dataset, segments=blocks)
+    problem = ShootingProblem(structure, dataset, blocks, names, params)
     lower, upper = structure.bounds(names)
-    q, n_state = len(names), structure.order + 1  # per block: heading, yaw rate (and acceleration)
-    bias = structure.yaw_rate_bias(params)
-    x = np.concatenate(
-        [
-            [params[n] for n in names],
-            [v for a, _ in blocks for v in (dataset.heading[a], dataset.yaw_rate[a] - bias, 0.0)[:n_state]],
-        ]
-    )
-    owner = np.full(dataset.n_samples, -1)
-    for i, (a, b) in enumerate(blocks):
-        owner[a:b] = i
-    inside = owner >= 0
+    q, chosen = len(names), range(len(names))
+    x = np.concatenate([[params[n] for n in names], problem.initial_states(structure.yaw_rate_bias(params)).ravel()])
+    inside = problem.owner >= 0
     noise = np.array([dataset.noise_std("yaw_rate"), dataset.noise_std("heading")])
     measured = np.concatenate([dataset.yaw_rate[inside], dataset.heading[inside]])
     scale = np.repeat(1.0 / noise, int(inside.sum()))
+    columns = problem.columns(np.tile(problem.owner[inside], 2))  # rows: yaw rate, heading
 
     def runs(points):
         """Yaw rate (rad/s) and heading (rad) of the free runs of several unknown vectors, one row
         each, in the blocks."""
-        sets = [dict(params, **dict(zip(names, point[:q]))) for point in points]
-        initials = [
-            [tuple(point[q + n_state * i : q + n_state * (i + 1)]) + (0.0,) * (3 - n_state) for i in range(len(blocks))]
-            for point in points
-        ]
-        psi, r = structure.simulate_runs(sets, dataset, initials)
+        psi, r = problem.simulate(points)
         return np.hstack([r[:, inside], psi[:, inside]])
 
     for _ in range(iterations):
-        steps = 1e-6 * np.maximum(np.abs(x), 1e-2)
-        points = [x] + [x + step * unit for step, unit in zip(steps[:q], np.eye(len(x)))]
-        for c in range(n_state):  # every block's state component at once: the blocks are disjoint
-            shifted = x.copy()
-            shifted[q + c :: n_state] += steps[q + c :: n_state]
-            points.append(shifted)
-        r = runs(points)
+        points, steps = problem.difference_points(x, upper, chosen)
+        r = runs([x] + points)
         error = (r[0] - measured) * scale
-        jacobian = np.zeros((len(error), len(x)))
-        jacobian[:, :q] = ((r[1 : q + 1] - r[0]) * scale / steps[:q, None]).T
-        rows = np.arange(len(error))
-        for c in range(n_state):
-            columns = q + n_state * np.tile(owner[inside], 2) + c
-            jacobian[rows, columns] = (r[q + 1 + c] - r[0]) * scale / steps[columns]
+        jacobian = problem.jacobian(x, points, steps, (r[1:] - r[0]) * scale, chosen, columns)
         if not (np.all(np.isfinite(error)) and np.all(np.isfinite(jacobian))):
             break
         step = np.linalg.lstsq(jacobian, -error, rcond=None)[0]

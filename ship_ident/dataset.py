@@ -180,7 +180,27 @@ def resample_series(
     unwrap_heading: bool = True,
     meta: dict | None = None,
 ) -> Dataset:
-    """Turn asynchronous time series into one uniformly sampled Dataset (see ``resample_signals``)."""
+    """Turn asynchronous time series into one uniformly sampled Dataset.
+
+    Parameters
+    ----------
+    series : dict
+        ``rudder``, ``heading`` and ``yaw_rate`` (optionally ``speed``) to ``(stamps_s, values)``,
+        SI units.
+    sample_time : float
+        Grid step (s).
+    gap_threshold : float or None
+        Longest stretch without a sample that is not a gap (s; default 5 sample times).
+    unwrap_heading : bool
+        Unwrap the heading before interpolating it.
+    meta : dict or None
+        Facts about the source, kept in ``Dataset.meta``.
+
+    Returns
+    -------
+    Dataset
+        The signals on the grid, cut into segments at the gaps (``resample_signals``).
+    """
     time, values, segments, gaps = resample_signals(series, sample_time, gap_threshold, unwrap_heading)
     return Dataset(
         time=time,
@@ -231,17 +251,38 @@ def resample_signals(
     unwrap_heading: bool = True,
     required=("rudder", "heading", "yaw_rate"),
 ):
-    """Asynchronous time series on one uniform grid: ``(time, {name: values}, segments, gaps)``.
+    """Asynchronous time series on one uniform grid.
 
-    ``series`` maps ``rudder``, ``heading``, ``yaw_rate`` (and optionally
-    ``speed``, or any other signal) to ``(stamps_s, values)``; the ``required`` ones must be there.
-    Non-finite samples are dropped,
-    stamps sorted and de-duplicated. The grid covers the span where every
-    signal has data; values are linearly interpolated (heading after
-    unwrapping), or averaged over each grid step when sampled faster
-    (``on_grid``). Where any signal has no sample for longer than
-    ``gap_threshold`` (default 5 sample times) the grid is cut: the gap is
-    reported in ``gaps`` and the segments on each side stay apart.
+    Non-finite samples are dropped, stamps sorted and de-duplicated. The grid covers the span where
+    every signal has data; values are linearly interpolated (heading after unwrapping), or averaged
+    over each grid step when sampled faster (``on_grid``). Where any signal has no sample for
+    longer than ``gap_threshold`` the grid is cut: the gap is reported in ``gaps`` and the
+    segments on each side stay apart.
+
+    Parameters
+    ----------
+    series : dict
+        ``rudder``, ``heading``, ``yaw_rate`` (and optionally ``speed``, or any other signal) to
+        ``(stamps_s, values)``.
+    sample_time : float
+        Grid step (s).
+    gap_threshold : float or None
+        Longest stretch without a sample that is not a gap (s; default 5 sample times).
+    unwrap_heading : bool
+        Unwrap the heading (rad) before interpolating it.
+    required : sequence of str
+        Signals that must be in ``series``.
+
+    Returns
+    -------
+    time : ndarray
+        The grid (s).
+    values : dict
+        Each signal on the grid.
+    segments : tuple of (int, int)
+        Half-open index ranges of contiguous data.
+    gaps : list
+        The gaps found.
     """
     if sample_time <= 0:
         raise DataError(f"sample_time must be > 0 s, got {sample_time}")
@@ -321,10 +362,22 @@ def join_recordings(
 ) -> Dataset:
     """Several recordings as one Dataset, each its own segment(s), never bridged.
 
-    All are brought onto one grid step ``sample_time`` (s; default the first recording's) and laid
-    one after another in time, two steps apart. ``meta["recordings"]`` lists each recording as
-    ``{"name", "start", "stop"}`` (sample indices, stop exclusive); the names default to each
-    recording's ``meta["source"]``. A single recording gets its one entry too.
+    All are brought onto one grid step and laid one after another in time, two steps apart.
+
+    Parameters
+    ----------
+    recordings : list of Dataset
+        The recordings, in order.
+    names : list of str or None
+        Their names (default: each recording's ``meta["source"]``).
+    sample_time : float or None
+        The common grid step (s; default the first recording's).
+
+    Returns
+    -------
+    Dataset
+        The joined data; ``meta["recordings"]`` lists each recording as ``{"name", "start",
+        "stop"}`` (sample indices, stop exclusive), a single recording too.
     """
     if not recordings:
         raise DataError("no recordings given; name at least one bag or CSV file")

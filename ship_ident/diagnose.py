@@ -315,12 +315,38 @@ def held_out_window(parameters: dict, held_out_s: float) -> float:
 
 
 def covered(dataset: Dataset) -> float:
-    """Time (s) covered by a dataset's segments."""
+    """Time covered by a dataset's segments.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+
+    Returns
+    -------
+    float
+        Seconds inside the segments (gaps left out).
+    """
     return float(sum(b - a for a, b in dataset.segments) * dataset.sample_time)
 
 
 def free_run(structure: Structure, parameters: dict, dataset: Dataset) -> FreeRun:
-    """Free runs from the measured state at the start of every segment (window) of ``dataset``."""
+    """The model run free through every segment (window) of the data.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model.
+    parameters : dict
+        Its parameters (SI units).
+    dataset : Dataset
+        The data; each segment's run starts from the measured state at its first sample.
+
+    Returns
+    -------
+    FreeRun
+        Heading (rad) and yaw rate (rad/s) of the runs, with the data they are judged on.
+    """
     heading, yaw_rate = structure.simulate(parameters, dataset)
     return FreeRun(heading, yaw_rate, free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate))
 
@@ -565,7 +591,20 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
 
 
 def parameter_warnings(estimate: Estimate) -> list[dict]:
-    """Parameters at their physical bounds or poorly determined (std error larger than the value)."""
+    """The estimate's parameters on a physical bound or poorly determined.
+
+    Parameters
+    ----------
+    estimate : Estimate
+        A fit.
+
+    Returns
+    -------
+    list of dict
+        One per parameter on a bound (``effects.on_bound``; kind ``at_lower_bound`` or
+        ``at_upper_bound``, with the effect that would free it) or with a standard error larger
+        than its value (``poorly_determined``): parameter, value, kind and message.
+    """
     out = []
     structure = estimate.structure
     for name in structure.free_names:
@@ -734,12 +773,33 @@ NOT_BETTER = "no_better_than_without"  # flag: every fit of the effect ran worse
 def no_worse(
     refit: Estimate | str, training: Dataset, method: str, nested: dict, fitted_windows: Dataset
 ) -> Estimate | str:
-    """A candidate never ends worse on the training data than the model without it (``nested``):
+    """The candidate's fit, never worse on the training data than the model without the effect.
+
+    A candidate never ends worse on the training data than the model without it (``nested``):
     when its free runs on the training windows ``fitted_windows`` miss the yaw rate by more than
     ``MIN_TRAINING_GAIN`` beyond the model's, it is refitted from the model with the effect
     neutral alone (no effect starts), and when that is worse too, it is that neutral start. A
     slow ship's rudder-delay profile once started the search at T1 = T2 = 0.01 s with a 4 s delay:
-    short shooting intervals fit it, free runs miss the yaw rate by 38 % more than without it."""
+    short shooting intervals fit it, free runs miss the yaw rate by 38 % more than without it.
+
+    Parameters
+    ----------
+    refit : Estimate or str
+        The candidate's fit, or why it failed.
+    training : Dataset
+        The training data.
+    method : str
+        The estimation method (``make_estimator``).
+    nested : dict
+        Parameters of the model without the effect.
+    fitted_windows : Dataset
+        The training windows the free runs are judged on.
+
+    Returns
+    -------
+    Estimate or str
+        The candidate's fit, its refit from the neutral start or that start; a failure unchanged.
+    """
     if isinstance(refit, str):
         return refit
     structure = refit.structure
@@ -926,8 +986,31 @@ def diagnose(
     With ``effects``, they are added to the base model one at a time, each fit also starting
     from the previous one; the model without the last listed effect (``before``) is kept, so the
     report shows the error fall that effect brought.
-    ``progress`` receives one-line messages; ``workers`` processes refit the
-    candidates (default: the CPU count).
+    The held-out judgement is a Diebold-Mariano test (Diebold and Mariano, "Comparing predictive
+    accuracy", 1995) of the squared free-run errors' difference, on the effective sample size of
+    that autocorrelated difference.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The record to fit (and, without ``validation``, to hold out from).
+    model : str
+        The base model, "nomoto1" or "nomoto2".
+    effects : str or sequence of str
+        Effects added to the base model (``parse_effects``).
+    method : str
+        The estimation method (``make_estimator``).
+    progress : callable or None
+        Receives one-line messages.
+    workers : int or None
+        Processes that refit the candidates (default: the CPU count).
+    validation : Dataset or None
+        Held-out data from another recording.
+
+    Returns
+    -------
+    Diagnosis
+        The fits, the held-out figures, the verdict and the candidates ranked.
     """
     say = progress or (lambda message: None)
     workers = (os.cpu_count() or 1) if workers is None else workers
@@ -1052,7 +1135,18 @@ def diagnose(
 
 
 def signal_table(diagnosis: Diagnosis) -> list[dict]:
-    """Held-out free-run measures (RMSE, R, E', STD ratio, fit %) per signal, before and now."""
+    """Held-out free-run measures per signal, before and now.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+        A finished diagnosis.
+
+    Returns
+    -------
+    list of dict
+        One row per signal (heading, yaw rate) and model: RMSE, correlation R, E', STD ratio, fit %.
+    """
     rows = []
     runs = [("now", diagnosis.run)] + ([("before", diagnosis.before_run)] if diagnosis.before_run else [])
     for label, run in runs:

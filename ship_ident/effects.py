@@ -91,8 +91,19 @@ class ForcingTerm:
 
 
 def heading_harmonics(psi: np.ndarray) -> dict:
-    """The first two harmonics of the heading psi (rad), cos(k psi) and sin(k psi) for k = 1, 2:
-    a steady wind or current's yaw forcing along the heading, and its regression columns."""
+    """The first two harmonics of the heading: a steady wind or current's yaw forcing along it.
+
+    Parameters
+    ----------
+    psi : ndarray
+        Heading (rad).
+
+    Returns
+    -------
+    dict
+        cos(k psi) and sin(k psi) for k = 1, 2 (dimensionless), by column name ("cos(1psi)", ...),
+        the wind_yaw effect's regression columns.
+    """
     return {f"{f.__name__}({k}psi)": f(k * psi) for k in (1, 2) for f in (np.cos, np.sin)}
 
 
@@ -116,7 +127,9 @@ class Evidence:
 
 @dataclass
 class StartContext:
-    """What an effect's ``starts`` reads: the training data (a ``Dataset``), ``nested``, the fitted
+    """What an effect's ``starts`` reads.
+
+    The training data (a ``Dataset``), ``nested``, the fitted
     parameters of the model without the effect, and ``refit(dataset)``, that model's cheap
     regression fit (parameters) on other data, e.g. the training data seen through the effect."""
 

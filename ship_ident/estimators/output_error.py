@@ -174,11 +174,12 @@ def _dense(a) -> np.ndarray:
 
 
 def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> tuple[np.ndarray, ...]:
-    """Heteroscedasticity-and-autocorrelation-consistent (Newey-West) standard errors of the
-    first ``p`` unknowns: bread (J'J)^-1 (``scaled_inverse``), meat the Bartlett-weighted long-run covariance of
-    the per-sample scores J_k' f_k (heading and yaw-rate rows of one sample summed), lags up
-    to ``bandwidth`` samples (one shooting interval: residuals of different intervals are
-    nearly independent). Only the parameter rows of the bread are needed, so the long-run
+    """Heteroscedasticity-and-autocorrelation-consistent standard errors (Newey and West, "A simple,
+    positive semi-definite, heteroskedasticity and autocorrelation consistent covariance matrix",
+    1987) of the first ``p`` unknowns: bread (J'J)^-1 (``scaled_inverse``), meat the
+    Bartlett-weighted long-run covariance of the per-sample scores J_k' f_k (heading and yaw-rate
+    rows of one sample summed), lags up to ``bandwidth`` samples (one shooting interval: residuals
+    of different intervals are nearly independent). Only the parameter rows of the bread are needed, so the long-run
     covariance is taken of the p-dimensional projected scores: u' W u with W the Toeplitz
     matrix of the Bartlett weights, W u one convolution (FFT for long lag windows), so the
     cost is linear in the samples. ``J`` may be a scipy sparse matrix. Also returns the plain

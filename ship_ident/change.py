@@ -50,7 +50,9 @@ from dataclasses import replace
 import numpy as np
 
 from .dataset import Dataset, cut_segments
-from .estimators.base import scaled_inverse
+from .effects import yaw_time_constant
+from .estimators.base import REFERENCE_RELATIVE_ERRORS, scaled_inverse
+from .estimators.shooting import ShootingProblem
 from .metrics import effective_sample_fraction
 from .noise import SENSOR_RESOLUTION
 from .structure import Structure
@@ -60,11 +62,6 @@ SHORT_RATIO_FACTOR = 4.0  # the newest refit period's error must exceed this man
 MIN_SHORT_SAMPLES = 20  # the short test's newest samples: at least this many (a median of 20)
 MEDIAN_OF_CHI2_1 = 0.4549  # median of e^2 / sigma^2 for Gaussian e
 MIN_LEVEL = SENSOR_RESOLUTION**2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
-# A reference model must be well determined, its gain as well as an OK estimate's: a loosely known K
-# travels with a cubic damping far off, which mispredicts the next turns of the same hull (a false
-# change), or with a window straddling a change, bent towards the new hull. T1 may be looser: steady
-# turns determine K to 0.2 % but T1 only to 8-20 %, and such a reference still finds a change.
-REFERENCE_RELATIVE_ERRORS = {"K": 0.03, "T": 0.2, "T1": 0.2}
 # The gain test: a newest block mispredicted by more than GAIN_TEST_RATIO (below ``ratio``) also votes
 # for a change when K refitted on it moves by more than GAIN_TEST_SHIFT and GAIN_TEST_STANDARD_ERRORS
 # (a loaded hull in a steady turn, its yaw rate 30 % low, shows only 4-6x its usual error in noisy
@@ -84,19 +81,6 @@ LOCATION_STEP = 0.5  # s between candidate change times (a coarse pass at four t
 # new fit (a steady turn's restart 1.4 s early: the first full fit 16 % off), new data before it only
 # go unused.
 LOCATION_TOLERANCE = 3.84
-
-
-def covering_blocks(dataset: Dataset, n: int) -> tuple:
-    """Half-open index ranges of blocks of n samples covering the dataset's segments, in time order,
-    each segment's blocks counted back from its end (its first block may be shorter; blocks of one
-    sample are left out): the newest block, where a changed vessel shows first, is a whole one (cut
-    from the start, 30.5 s after a change left a newest block of 0.5 s, too short to show it)."""
-    return tuple(
-        (max(b - n, start), b)
-        for start, stop in dataset.segments
-        for b in reversed(range(stop, start, -n))
-        if b - max(b - n, start) >= 2
-    )
 
 
 def block_squared_errors(structure: Structure, params: dict, dataset: Dataset, blocks: tuple, lead: int = 0) -> list:
@@ -159,8 +143,8 @@ class ChangeDetector:
         ):
             return
         n = int(round(self.length / dataset.sample_time))
-        blocks = cut_segments(dataset.segments, n, whole=True) + cut_segments(
-            dataset.segments, n, whole=True, offset=n // 2
+        blocks = cut_segments(dataset.segments, n, align="start", whole=True) + cut_segments(
+            dataset.segments, n, align="start", offset=n // 2, whole=True
         )
         errors = block_errors(structure, params, dataset, blocks, lead=n)
         if len(errors):
@@ -305,50 +289,27 @@ def fit_gain_and_cost(
     """``fit_gain``, with the sum of squared errors of the fitted free runs (yaw rate and heading, each
     over its noise std; dimensionless) last."""
     names = [n for n in names if n in params]
-    dataset = replace(dataset, segments=blocks)
+    problem = ShootingProblem(structure, dataset, blocks, names, params)
     lower, upper = structure.bounds(names)
-    q, n_state = len(names), structure.order + 1  # per block: heading, yaw rate (and acceleration)
-    bias = structure.yaw_rate_bias(params)
-    x = np.concatenate(
-        [
-            [params[n] for n in names],
-            [v for a, _ in blocks for v in (dataset.heading[a], dataset.yaw_rate[a] - bias, 0.0)[:n_state]],
-        ]
-    )
-    owner = np.full(dataset.n_samples, -1)
-    for i, (a, b) in enumerate(blocks):
-        owner[a:b] = i
-    inside = owner >= 0
+    q, chosen = len(names), range(len(names))
+    x = np.concatenate([[params[n] for n in names], problem.initial_states(structure.yaw_rate_bias(params)).ravel()])
+    inside = problem.owner >= 0
     noise = np.array([dataset.noise_std("yaw_rate"), dataset.noise_std("heading")])
     measured = np.concatenate([dataset.yaw_rate[inside], dataset.heading[inside]])
     scale = np.repeat(1.0 / noise, int(inside.sum()))
+    columns = problem.columns(np.tile(problem.owner[inside], 2))  # rows: yaw rate, heading
 
     def runs(points):
         """Yaw rate (rad/s) and heading (rad) of the free runs of several unknown vectors, one row
         each, in the blocks."""
-        sets = [dict(params, **dict(zip(names, point[:q]))) for point in points]
-        initials = [
-            [tuple(point[q + n_state * i : q + n_state * (i + 1)]) + (0.0,) * (3 - n_state) for i in range(len(blocks))]
-            for point in points
-        ]
-        psi, r = structure.simulate_runs(sets, dataset, initials)
+        psi, r = problem.simulate(points)
         return np.hstack([r[:, inside], psi[:, inside]])
 
     for _ in range(iterations):
-        steps = 1e-6 * np.maximum(np.abs(x), 1e-2)
-        points = [x] + [x + step * unit for step, unit in zip(steps[:q], np.eye(len(x)))]
-        for c in range(n_state):  # every block's state component at once: the blocks are disjoint
-            shifted = x.copy()
-            shifted[q + c :: n_state] += steps[q + c :: n_state]
-            points.append(shifted)
-        r = runs(points)
+        points, steps = problem.difference_points(x, upper, chosen)
+        r = runs([x] + points)
         error = (r[0] - measured) * scale
-        jacobian = np.zeros((len(error), len(x)))
-        jacobian[:, :q] = ((r[1 : q + 1] - r[0]) * scale / steps[:q, None]).T
-        rows = np.arange(len(error))
-        for c in range(n_state):
-            columns = q + n_state * np.tile(owner[inside], 2) + c
-            jacobian[rows, columns] = (r[q + 1 + c] - r[0]) * scale / steps[columns]
+        jacobian = problem.jacobian(x, points, steps, (r[1:] - r[0]) * scale, chosen, columns)
         if not (np.all(np.isfinite(error)) and np.all(np.isfinite(jacobian))):
             break
         step = np.linalg.lstsq(jacobian, -error, rcond=None)[0]
@@ -385,10 +346,10 @@ def locate_change(structure: Structure, params: dict, dataset: Dataset, split: i
     first = max(start, split - n)
     origin = max(start, first - n)  # the side before the candidate starts here
 
-    def pieces(a: int, b: int) -> tuple:
-        return tuple((c, min(c + n, b)) for c in range(a, b, n) if min(c + n, b) - c >= 2)
+    def pieces(a: int, b: int) -> tuple:  # blocks of n samples from a to b, the last one shorter
+        return cut_segments(((a, b),), n, min_samples=2, align="start")
 
-    span = GAIN_FIT_SPAN * params.get("T1", params.get("T", 0.0)) / dataset.sample_time
+    span = GAIN_FIT_SPAN * yaw_time_constant(params) / dataset.sample_time
 
     def fitted_cost(blocks: tuple, names: tuple) -> float:
         # K alone is a point of the model with K and T1 (T1 held at the reference's): where the

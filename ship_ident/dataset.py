@@ -19,19 +19,55 @@ class DataError(ValueError):
     """Input data that cannot be used; the message says what is wrong and what to do."""
 
 
-def cut_segments(segments, samples: int, min_samples: int = 1, whole: bool = False, offset: int = 0) -> tuple:
-    """Half-open index ranges that cut each segment ``[a, b)`` into pieces of about ``samples``:
-    near-equal pieces covering the segment (a short segment is one piece), those shorter than
-    ``min_samples`` dropped; or, ``whole``, pieces of exactly ``samples`` from ``offset`` into the
-    segment, the remainder dropped. Free runs, shooting intervals and test blocks never cross a gap."""
+CUT_ALIGNMENTS = ("even", "start", "end")
+
+
+def cut_segments(
+    segments, samples: int, min_samples: int = 1, align: str = "even", offset: int = 0, whole: bool = False
+) -> tuple:
+    """Cut each segment into pieces of about ``samples``; no piece crosses a gap.
+
+    Free runs, shooting intervals and test blocks are all cut here.
+
+    Parameters
+    ----------
+    segments : sequence of (int, int)
+        Half-open sample index ranges ``[a, b)`` of contiguous data.
+    samples : int
+        Samples per piece.
+    min_samples : int
+        Pieces shorter than this are dropped.
+    align : {"even", "start", "end"}
+        "even": near-equal pieces covering the segment (a short segment is one piece); "start":
+        pieces of exactly ``samples`` from ``offset`` samples into the segment, the last one
+        shorter; "end": pieces of exactly ``samples`` counted back from the segment's end, the first
+        one shorter (the newest piece, where a changed hull shows first, is a whole one: cut from the
+        start, 30.5 s after a change would leave a newest piece of 0.5 s, too short to show it).
+    offset : int
+        Samples skipped at each segment's start ("start" only).
+    whole : bool
+        Drop the shorter piece: every piece has exactly ``samples`` (with "start" or "end").
+
+    Returns
+    -------
+    tuple of (int, int)
+        The pieces' half-open index ranges, in time order.
+    """
+    if align not in CUT_ALIGNMENTS:
+        raise ValueError(f"align must be one of {', '.join(CUT_ALIGNMENTS)}, not {align!r}")
+    if whole:
+        min_samples = max(min_samples, samples)
     out = []
     for a, b in segments:
-        if whole:
-            out += [(s, s + samples) for s in range(a + offset, b - samples + 1, samples)]
-            continue
-        pieces = max(1, int(round((b - a) / samples)))
-        edges = np.linspace(a, b, pieces + 1).round().astype(int)
-        out += [(int(lo), int(hi)) for lo, hi in zip(edges[:-1], edges[1:]) if hi - lo >= min_samples]
+        if align == "even":
+            count = max(1, int(round((b - a) / samples)))
+            edges = [int(e) for e in np.linspace(a, b, count + 1).round()]
+            pieces = zip(edges[:-1], edges[1:])
+        elif align == "start":
+            pieces = ((s, min(s + samples, b)) for s in range(a + offset, b, samples))
+        else:
+            pieces = ((max(e - samples, a), e) for e in reversed(range(b, a, -samples)))
+        out += [(lo, hi) for lo, hi in pieces if hi - lo >= min_samples]
     return tuple(out)
 
 
@@ -144,7 +180,27 @@ def resample_series(
     unwrap_heading: bool = True,
     meta: dict | None = None,
 ) -> Dataset:
-    """Turn asynchronous time series into one uniformly sampled Dataset (see ``resample_signals``)."""
+    """Turn asynchronous time series into one uniformly sampled Dataset.
+
+    Parameters
+    ----------
+    series : dict
+        ``rudder``, ``heading`` and ``yaw_rate`` (optionally ``speed``) to ``(stamps_s, values)``,
+        SI units.
+    sample_time : float
+        Grid step (s).
+    gap_threshold : float or None
+        Longest stretch without a sample that is not a gap (s; default 5 sample times).
+    unwrap_heading : bool
+        Unwrap the heading before interpolating it.
+    meta : dict or None
+        Facts about the source, kept in ``Dataset.meta``.
+
+    Returns
+    -------
+    Dataset
+        The signals on the grid, cut into segments at the gaps (``resample_signals``).
+    """
     time, values, segments, gaps = resample_signals(series, sample_time, gap_threshold, unwrap_heading)
     return Dataset(
         time=time,
@@ -195,17 +251,38 @@ def resample_signals(
     unwrap_heading: bool = True,
     required=("rudder", "heading", "yaw_rate"),
 ):
-    """Asynchronous time series on one uniform grid: ``(time, {name: values}, segments, gaps)``.
+    """Asynchronous time series on one uniform grid.
 
-    ``series`` maps ``rudder``, ``heading``, ``yaw_rate`` (and optionally
-    ``speed``, or any other signal) to ``(stamps_s, values)``; the ``required`` ones must be there.
-    Non-finite samples are dropped,
-    stamps sorted and de-duplicated. The grid covers the span where every
-    signal has data; values are linearly interpolated (heading after
-    unwrapping), or averaged over each grid step when sampled faster
-    (``on_grid``). Where any signal has no sample for longer than
-    ``gap_threshold`` (default 5 sample times) the grid is cut: the gap is
-    reported in ``gaps`` and the segments on each side stay apart.
+    Non-finite samples are dropped, stamps sorted and de-duplicated. The grid covers the span where
+    every signal has data; values are linearly interpolated (heading after unwrapping), or averaged
+    over each grid step when sampled faster (``on_grid``). Where any signal has no sample for
+    longer than ``gap_threshold`` the grid is cut: the gap is reported in ``gaps`` and the
+    segments on each side stay apart.
+
+    Parameters
+    ----------
+    series : dict
+        ``rudder``, ``heading``, ``yaw_rate`` (and optionally ``speed``, or any other signal) to
+        ``(stamps_s, values)``.
+    sample_time : float
+        Grid step (s).
+    gap_threshold : float or None
+        Longest stretch without a sample that is not a gap (s; default 5 sample times).
+    unwrap_heading : bool
+        Unwrap the heading (rad) before interpolating it.
+    required : sequence of str
+        Signals that must be in ``series``.
+
+    Returns
+    -------
+    time : ndarray
+        The grid (s).
+    values : dict
+        Each signal on the grid.
+    segments : tuple of (int, int)
+        Half-open index ranges of contiguous data.
+    gaps : list
+        The gaps found.
     """
     if sample_time <= 0:
         raise DataError(f"sample_time must be > 0 s, got {sample_time}")
@@ -285,10 +362,22 @@ def join_recordings(
 ) -> Dataset:
     """Several recordings as one Dataset, each its own segment(s), never bridged.
 
-    All are brought onto one grid step ``sample_time`` (s; default the first recording's) and laid
-    one after another in time, two steps apart. ``meta["recordings"]`` lists each recording as
-    ``{"name", "start", "stop"}`` (sample indices, stop exclusive); the names default to each
-    recording's ``meta["source"]``. A single recording gets its one entry too.
+    All are brought onto one grid step and laid one after another in time, two steps apart.
+
+    Parameters
+    ----------
+    recordings : list of Dataset
+        The recordings, in order.
+    names : list of str or None
+        Their names (default: each recording's ``meta["source"]``).
+    sample_time : float or None
+        The common grid step (s; default the first recording's).
+
+    Returns
+    -------
+    Dataset
+        The joined data; ``meta["recordings"]`` lists each recording as ``{"name", "start",
+        "stop"}`` (sample indices, stop exclusive), a single recording too.
     """
     if not recordings:
         raise DataError("no recordings given; name at least one bag or CSV file")

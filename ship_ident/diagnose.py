@@ -56,6 +56,7 @@ import numpy as np
 from .dataset import DataError, Dataset, cut_segments
 from .effects import EFFECTS, Evidence, StartContext, heading_harmonics, yaw_time_constant
 from .estimators import Estimate, make_estimator, regression_method
+from .estimators.base import Z_95
 from .integrate import forcing as yaw_forcing
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
 from .signals import Signals, compute_signals
@@ -303,11 +304,6 @@ def windows(dataset: Dataset, length_s: float) -> Dataset:
     return replace(dataset, segments=cut_segments(dataset.segments, step, min_samples=2))
 
 
-def time_constant(parameters: dict) -> float:
-    """Dominant yaw time constant (s) of a parameter set in either form (``yaw_time_constant``)."""
-    return yaw_time_constant(parameters)
-
-
 def held_out_window(parameters: dict, held_out_s: float) -> float:
     """Length (s) of the held-out free-run windows: ``HELD_OUT_WINDOW_TIME_CONSTANTS`` yaw time
     constants, but short enough for ``HELD_OUT_MIN_WINDOWS`` windows in the longest held-out
@@ -317,17 +313,43 @@ def held_out_window(parameters: dict, held_out_s: float) -> float:
     and one run is one sample for the significance test: its verdict would hang on that run
     (on KVLCC2's 10/10 zigzag the verdict flipped with the resampling step).
     """
-    window = HELD_OUT_WINDOW_TIME_CONSTANTS * time_constant(parameters)
+    window = HELD_OUT_WINDOW_TIME_CONSTANTS * yaw_time_constant(parameters)
     return float(max(HELD_OUT_WINDOW_MIN_S, min(window, held_out_s / HELD_OUT_MIN_WINDOWS)))
 
 
 def covered(dataset: Dataset) -> float:
-    """Time (s) covered by a dataset's segments."""
+    """Time covered by a dataset's segments.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+
+    Returns
+    -------
+    float
+        Seconds inside the segments (gaps left out).
+    """
     return float(sum(b - a for a, b in dataset.segments) * dataset.sample_time)
 
 
 def free_run(structure: Structure, parameters: dict, dataset: Dataset) -> FreeRun:
-    """Free runs from the measured state at the start of every segment (window) of ``dataset``."""
+    """The model run free through every segment (window) of the data.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model.
+    parameters : dict
+        Its parameters (SI units).
+    dataset : Dataset
+        The data; each segment's run starts from the measured state at its first sample.
+
+    Returns
+    -------
+    FreeRun
+        Heading (rad) and yaw rate (rad/s) of the runs, with the data they are judged on.
+    """
     heading, yaw_rate = structure.simulate(parameters, dataset)
     return FreeRun(heading, yaw_rate, free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate))
 
@@ -544,7 +566,7 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
     residual, rudder = residual[ok], held_out.rudder[ok]
     n = len(residual)
     max_lag = max(1, min(int(round(CORRELATION_LAG_S / held_out.sample_time)), n // 4))
-    bound = 1.96 / np.sqrt(max(n, 1))
+    bound = Z_95 / np.sqrt(max(n, 1))
     lags, auto = correlation(residual, residual, max_lag)
     _, cross = correlation(rudder, residual, max_lag)
     positive = lags > 0
@@ -572,18 +594,27 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
 
 
 def parameter_warnings(estimate: Estimate) -> list[dict]:
-    """Parameters at their physical bounds or poorly determined (std error larger than the value)."""
+    """The estimate's parameters on a physical bound or poorly determined.
+
+    Parameters
+    ----------
+    estimate : Estimate
+        A fit.
+
+    Returns
+    -------
+    list of dict
+        One per parameter on a bound (``effects.on_bound``; kind ``at_lower_bound`` or
+        ``at_upper_bound``, with the effect that would free it) or with a standard error larger
+        than its value (``poorly_determined``): parameter, value, kind and message.
+    """
     out = []
     structure = estimate.structure
     for name in structure.free_names:
         p = structure.parameter(name)
         value, std = estimate.parameters[name], estimate.std_errors.get(name, np.inf)
-        tol = 1e-4 * max(1.0, abs(value))
-        pinned = [
-            (b, side)
-            for b, side in ((p.lower, "lower"), (p.upper, "upper"))
-            if np.isfinite(b) and abs(value - b) <= tol
-        ]
+        reached = p.bound_reached(value)
+        pinned = [(b, side) for b, side in ((p.lower, "lower"), (p.upper, "upper")) if b == reached]
         for bound, side in pinned:
             hint = {
                 ("T3", "lower"): " (a rudder delay looks like this)",
@@ -745,12 +776,33 @@ NOT_BETTER = "no_better_than_without"  # flag: every fit of the effect ran worse
 def no_worse(
     refit: Estimate | str, training: Dataset, method: str, nested: dict, fitted_windows: Dataset
 ) -> Estimate | str:
-    """A candidate never ends worse on the training data than the model without it (``nested``):
+    """The candidate's fit, never worse on the training data than the model without the effect.
+
+    A candidate never ends worse on the training data than the model without it (``nested``):
     when its free runs on the training windows ``fitted_windows`` miss the yaw rate by more than
     ``MIN_TRAINING_GAIN`` beyond the model's, it is refitted from the model with the effect
     neutral alone (no effect starts), and when that is worse too, it is that neutral start. A
     slow ship's rudder-delay profile once started the search at T1 = T2 = 0.01 s with a 4 s delay:
-    short shooting intervals fit it, free runs miss the yaw rate by 38 % more than without it."""
+    short shooting intervals fit it, free runs miss the yaw rate by 38 % more than without it.
+
+    Parameters
+    ----------
+    refit : Estimate or str
+        The candidate's fit, or why it failed.
+    training : Dataset
+        The training data.
+    method : str
+        The estimation method (``make_estimator``).
+    nested : dict
+        Parameters of the model without the effect.
+    fitted_windows : Dataset
+        The training windows the free runs are judged on.
+
+    Returns
+    -------
+    Estimate or str
+        The candidate's fit, its refit from the neutral start or that start; a failure unchanged.
+    """
     if isinstance(refit, str):
         return refit
     structure = refit.structure
@@ -932,8 +984,31 @@ def diagnose(
     With ``effects``, they are added to the base model one at a time, each fit also starting
     from the previous one; the model without the last listed effect (``before``) is kept, so the
     report shows the error fall that effect brought.
-    ``progress`` receives one-line messages; ``workers`` processes refit the
-    candidates (default: the CPU count).
+    The held-out judgement is a Diebold-Mariano test (Diebold and Mariano, "Comparing predictive
+    accuracy", 1995) of the squared free-run errors' difference, on the effective sample size of
+    that autocorrelated difference.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The record to fit (and, without ``validation``, to hold out from).
+    model : str
+        The base model, "nomoto1" or "nomoto2".
+    effects : str or sequence of str
+        Effects added to the base model (``parse_effects``).
+    method : str
+        The estimation method (``make_estimator``).
+    progress : callable or None
+        Receives one-line messages.
+    workers : int or None
+        Processes that refit the candidates (default: the CPU count).
+    validation : Dataset or None
+        Held-out data from another recording.
+
+    Returns
+    -------
+    Diagnosis
+        The fits, the held-out figures, the verdict and the candidates ranked.
     """
     say = progress or (lambda message: None)
     workers = (os.cpu_count() or 1) if workers is None else workers
@@ -1022,7 +1097,7 @@ def diagnose(
     candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
     mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
-    tc = time_constant(estimate.parameters)
+    tc = yaw_time_constant(estimate.parameters)
     worst_window = float(np.clip(WORST_WINDOW_TIME_CONSTANTS * tc, *WORST_WINDOW_LIMITS_S))
     if validation is None:
         source = dataset.meta.get("source") or "the record"
@@ -1058,7 +1133,18 @@ def diagnose(
 
 
 def signal_table(diagnosis: Diagnosis) -> list[dict]:
-    """Held-out free-run measures (RMSE, R, E', STD ratio, fit %) per signal, before and now."""
+    """Held-out free-run measures per signal, before and now.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+        A finished diagnosis.
+
+    Returns
+    -------
+    list of dict
+        One row per signal (heading, yaw rate) and model: RMSE, correlation R, E', STD ratio, fit %.
+    """
     rows = []
     runs = [("now", diagnosis.run)] + ([("before", diagnosis.before_run)] if diagnosis.before_run else [])
     for label, run in runs:

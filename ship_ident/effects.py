@@ -24,6 +24,29 @@ import numpy as np
 
 from .integrate import TRIG_COS, TRIG_NONE, TRIG_SIN
 
+BOUND_SHARE = 0.01  # a parameter within 1 % of a physical bound is on it (Parameter.bound_reached)
+
+
+def on_bound(value: float, bound: float) -> bool:
+    """Whether ``value`` sits on the finite ``bound``.
+
+    Within ``BOUND_SHARE`` of the bound (plus 1e-6 in the parameter's SI unit, for a bound at or
+    near zero) is on it: a bounded search that runs off along a ridge of the cost (T1 -> infinity
+    with K and alpha, for a window no model fits) stops within a fraction of a percent of the bound
+    it was running to, not exactly on it.
+
+    Parameters
+    ----------
+    value, bound : float
+        A parameter's value and one of its bounds, in its SI unit.
+
+    Returns
+    -------
+    bool
+        True when the value is on the bound; False for an infinite bound.
+    """
+    return bool(np.isfinite(bound) and abs(value - bound) <= BOUND_SHARE * abs(bound) + 1e-6 * max(1.0, abs(bound)))
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -38,6 +61,23 @@ class Parameter:
     display_unit: str = ""  # e.g. "deg" for angles shown to people
     display_scale: float = 1.0  # SI value * display_scale = display value
 
+    def bound_reached(self, value: float) -> float | None:
+        """The physical bound ``value`` sits on, or None.
+
+        See ``on_bound`` for the tolerance.
+
+        Parameters
+        ----------
+        value : float
+            The parameter's value, in its SI unit.
+
+        Returns
+        -------
+        float or None
+            The lower or upper bound reached, None when the value is inside both.
+        """
+        return next((float(b) for b in (self.lower, self.upper) if on_bound(value, b)), None)
+
 
 @dataclass(frozen=True)
 class ForcingTerm:
@@ -51,8 +91,19 @@ class ForcingTerm:
 
 
 def heading_harmonics(psi: np.ndarray) -> dict:
-    """The first two harmonics of the heading psi (rad), cos(k psi) and sin(k psi) for k = 1, 2:
-    a steady wind or current's yaw forcing along the heading, and its regression columns."""
+    """The first two harmonics of the heading: a steady wind or current's yaw forcing along it.
+
+    Parameters
+    ----------
+    psi : ndarray
+        Heading (rad).
+
+    Returns
+    -------
+    dict
+        cos(k psi) and sin(k psi) for k = 1, 2 (dimensionless), by column name ("cos(1psi)", ...),
+        the wind_yaw effect's regression columns.
+    """
     return {f"{f.__name__}({k}psi)": f(k * psi) for k in (1, 2) for f in (np.cos, np.sin)}
 
 
@@ -76,7 +127,9 @@ class Evidence:
 
 @dataclass
 class StartContext:
-    """What an effect's ``starts`` reads: the training data (a ``Dataset``), ``nested``, the fitted
+    """What an effect's ``starts`` reads.
+
+    The training data (a ``Dataset``), ``nested``, the fitted
     parameters of the model without the effect, and ``refit(dataset)``, that model's cheap
     regression fit (parameters) on other data, e.g. the training data seen through the effect."""
 
@@ -89,8 +142,25 @@ T_UPPER_BOUND = 1e3  # s, the base models' upper bound on T and T1 (structure.BA
 
 
 def yaw_time_constant(params: dict) -> float:
-    """The hull's dominant yaw time constant (s) in either form: T, T1 + T2, or the slow pole's
-    time of the acceleration form (1 / |a1|), at most ``T_UPPER_BOUND``."""
+    """The hull's main yaw time constant (s), the one every time scale of the fits is drawn from.
+
+    T, T1 + T2, or the acceleration form's 1 / |a1| (T1 + T2 when it is stable; the time a
+    course-unstable turn takes to grow by e when not), at most ``T_UPPER_BOUND``. T1 + T2 rather
+    than T1: it is the mean delay (first moment) of the yaw rate's impulse response
+    1 / ((1 + T1 s)(1 + T2 s)), how long a yaw rate, and the information in an initial state, lasts;
+    it is the coefficient of r' (1 / a1 in the acceleration form, where T1 alone needs the roots),
+    and it stays smooth where T1 and T2 meet and trade places.
+
+    Parameters
+    ----------
+    params : dict
+        A parameter set of any model form (s, 1/s).
+
+    Returns
+    -------
+    float
+        The time constant (s); 1 s for a set without any.
+    """
     if "T" in params:
         return float(params["T"])
     if "T1" in params:
@@ -480,7 +550,7 @@ class CourseInstability(Effect):
     def evidence(self, context):
         s = context.signals
         c = _partial_corr(context.equation_residual, s.r, [s.delta])
-        pinned = max(context.parameters.get("T", 0.0), context.parameters.get("T1", 0.0)) >= 0.999 * T_UPPER_BOUND
+        pinned = any(on_bound(context.parameters.get(name, 0.0), T_UPPER_BOUND) for name in ("T", "T1"))
         note = (
             "; the time constant sits on its upper bound, which is what course instability looks like" if pinned else ""
         )

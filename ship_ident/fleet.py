@@ -39,6 +39,7 @@ from pathlib import Path
 
 from .bag_replay import replay_bag
 from .dataset import DataError
+from .estimators.base import Z_95
 from .jsonio import dumps_json
 from .online_config import ConfigError, OnlineConfig
 from .samples import Topics
@@ -298,13 +299,13 @@ def plot_drift(rows: list[dict], plot_dir: str) -> list[str]:
         fig, axes = plt.subplots(len(names), 1, sharex=True, figsize=(8, 2.6 * len(names)), squeeze=False)
         for ax, name in zip(axes[:, 0], names):
             y = [row[name] for row in mine]
-            err = [1.96 * row.get(f"{name}_std", math.nan) for row in mine]
+            err = [Z_95 * row.get(f"{name}_std", math.nan) for row in mine]
             ax.errorbar(x, y, yerr=err, fmt=".", ms=3, elinewidth=0.6, capsize=0)
             unit = "1/s" if name == "K" else "s"
             ax.set_ylabel(f"{name} ({unit})")
             ax.grid(alpha=0.3)
         axes[0, 0].set_title(
-            f"{vessel}: {len(mine)} estimates from {len({r['bag'] for r in mine})} bags (error bars 1.96 std)"
+            f"{vessel}: {len(mine)} estimates from {len({r['bag'] for r in mine})} bags (error bars {Z_95:g} std)"
         )
         axes[-1, 0].set_xlabel("time (UTC)" if dated else "hours of bag time, bags end to end")
         fig.tight_layout()

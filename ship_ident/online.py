@@ -33,13 +33,20 @@ from .change import (
     GAIN_FIT_SPAN,
     ChangeDetector,
     block_errors,
-    covering_blocks,
     fit_gain,
     with_held_errors,
 )
-from .dataset import DataError, Dataset, resample_series
+from .dataset import DataError, Dataset, cut_segments, resample_series
+from .effects import yaw_time_constant
 from .estimators import make_estimator
-from .estimators.base import MAX_RELATIVE_ERRORS, Estimate, excitation_shortfall, loose_parameters
+from .estimators.base import (
+    MAX_RELATIVE_ERRORS,
+    TRUSTED_RELATIVE_ERRORS,
+    Z_95,
+    Estimate,
+    excitation_shortfall,
+    loose_parameters,
+)
 from .input_checks import (
     REJECTIONS,
     heading_plausibility,
@@ -114,12 +121,9 @@ MIN_FRESH_SHARE = 1e-3  # two estimates' difference has at least this share of t
 # and the grid's floor loses one more (with 1.5 a ship's window, sample time 0.37 s, never was).
 FULL_WINDOW_MARGIN = 3.0
 
-# Relative standard errors (published, std / |value|) within which a new estimate is trusted (OK): a
-# 10 % error is then 3 (K) or 2.5 (T1) standard errors away; a looser one within MAX_RELATIVE_ERRORS is
-# published as uncertain_estimate (WARN), and after a change not at all if its K is known worse than
-# the last good estimate's. In the acceleration form (a hull whose linear yaw damping is weak or
-# negative) the rudder's yaw acceleration b (b0) stands for K and the dampings for the time constants.
-TRUSTED_RELATIVE_ERRORS = {"K": 0.03, "T": 0.04, "T1": 0.04, "b": 0.03, "b0": 0.03, "a1": 0.1}
+# A new estimate is trusted (OK) when its published relative errors are within TRUSTED_RELATIVE_ERRORS;
+# a looser one within MAX_RELATIVE_ERRORS is published as uncertain_estimate (WARN), and after a change
+# not at all if its K is known worse than the last good estimate's.
 # Shares of T1 above the estimate at which T2 is held to profile the cost along the T2 = T3 valley
 # (``first_order_valley``): a second pole the window cannot tell from zero may lie far beyond its 95 % end.
 VALLEY_RUNGS = (0.1, 0.2, 0.35, 0.5)
@@ -591,11 +595,12 @@ class OnlineIdentifier:
             held, held_errors = self._change.base, self._change.base_errors
         else:
             held, held_errors = last_good.parameters, last_good.std_errors
-        time_constant = held.get("T1", held.get("T"))
+        time_constant = yaw_time_constant(held)
         if dataset.duration < GAIN_FIT_SPAN * time_constant:
             return
         block = max(config.change_test_length, GAIN_BLOCK_SPAN * time_constant)
-        blocks = covering_blocks(dataset, int(round(block / dataset.sample_time)))
+        # blocks counted back from the end: the newest, where a changed hull shows first, is a whole one
+        blocks = cut_segments(dataset.segments, int(round(block / dataset.sample_time)), min_samples=2, align="end")
         try:
             for names in GAIN_FITS:  # the most the new data determine (judged by the standard errors alone:
                 # a rudder held in a turn determines K, r = K delta, however little it moves)
@@ -661,7 +666,7 @@ class OnlineIdentifier:
         if last_good is None or last_good.structure.label() != structure.label():
             return None
         n = int(round(config.change_test_length / dataset.sample_time))
-        blocks = covering_blocks(dataset, n)
+        blocks = cut_segments(dataset.segments, n, min_samples=2, align="end")
         new_blocks, old_blocks = (
             block_errors(structure, p, dataset, blocks, lead=n) for p in (estimate.parameters, last_good.parameters)
         )
@@ -775,9 +780,9 @@ def _on_bound(structure: Structure, params: dict) -> str:
     found = []
     for name in structure.free_names:
         parameter, value = structure.parameter(name), params[name]
-        for bound in (parameter.lower, parameter.upper):
-            if bound != 0 and math.isfinite(bound) and abs(value - bound) <= 1e-3 * abs(bound):
-                found.append(f"{name} = {value:.4g} {parameter.unit} on its bound {bound:g}")
+        bound = parameter.bound_reached(value)
+        if bound is not None and bound != 0:
+            found.append(f"{name} = {value:.4g} {parameter.unit} on its bound {bound:g}")
     return ", ".join(found)
 
 
@@ -874,7 +879,7 @@ def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset
     if not all(n in parameters and n in std_errors for n in names):
         return std_errors
     t1, t2 = abs(parameters["T1"]), abs(parameters["T2"])
-    if not 1.96 * std_errors["T2"] > t2:
+    if not Z_95 * std_errors["T2"] > t2:
         return std_errors
     if hasattr(estimator, "fit_held"):
         return dict(std_errors, T1=max(std_errors["T1"], valley_slide(estimate, estimator, structure, dataset)))
@@ -904,7 +909,7 @@ def profile_slides(estimate, estimator, structure, dataset, name, ladders, of, m
     other parameters' starts there), every point weighed alike (``fit_held``'s ``weighted_at``). A
     point where the cost rose by chi2 (its rise over that of the estimate held where it is,
     deflated by the Gauss-Newton over the Newey-West variance of each parameter: residuals that are
-    not white count less) moved a parameter by d: its error is at least |d| / max(sqrt(chi2), 1.96)
+    not white count less) moved a parameter by d: its error is at least |d| / max(sqrt(chi2), Z_95)
     (a point inside the 95 % region moved it within its interval; for a quadratic profile this is
     its error exactly). A ladder's climb stops past PROFILE_CLIMB_CHI2. A fit that fails leaves the
     parameters undetermined (infinite errors)."""
@@ -927,7 +932,7 @@ def profile_slides(estimate, estimator, structure, dataset, name, ladders, of, m
                 rise = held.info["cost"] - base.info["cost"]
                 for q in of:
                     shift = abs(held.parameters[q] - base.parameters[q])
-                    slides[q] = max(slides[q], shift / max(math.sqrt(max(deflate[q] * rise, 0.0)), 1.96))
+                    slides[q] = max(slides[q], shift / max(math.sqrt(max(deflate[q] * rise, 0.0)), Z_95))
                 if rise > PROFILE_CLIMB_CHI2:
                     break
         return slides

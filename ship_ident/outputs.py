@@ -16,12 +16,12 @@ import threading
 import numpy as np
 
 from .dataset import DataError, resample_series
+from .estimators.base import Z_95
 from .online import CONDITION_LEVELS, RefitRecord
 from .online_config import OnlineConfig
 from .samples import ROLES, Sample
 from .structure import Structure, StructureError
 
-Z95 = 1.959963984540054  # two-sided 95 % quantile of the normal distribution
 GAIN_BAND_LABELS = ("K_low95", "K", "K_high95")
 DIAGNOSTIC_NAME = "ship_ident: identification"
 # ~/predicted_yaw_rate is a geometry_msgs/Vector3Stamped in the body frame forward-right-down (the
@@ -48,7 +48,7 @@ def gain_band(record: RefitRecord) -> list[float] | None:
     error = estimate.get("std_errors", {}).get("K", math.nan)
     if not (math.isfinite(gain) and math.isfinite(error)):
         return None
-    return [gain - Z95 * error, gain, gain + Z95 * error]
+    return [gain - Z_95 * error, gain, gain + Z_95 * error]
 
 
 def diagnostic_status(record: RefitRecord, extra: dict | None = None) -> tuple[int, str, list[tuple[str, str]]]:

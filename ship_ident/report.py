@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .diagnose import Diagnosis, covered, signal_table  # noqa: E402
+from .estimators.base import Z_95  # noqa: E402
 
 DEG = np.degrees(1.0)
 DPI = 80
@@ -211,7 +212,7 @@ def plot_parameters(d: Diagnosis, directory: Path) -> str:
         p = d.structure.parameter(name)
         scale = p.display_scale if p.display_unit else 1.0
         value, std = d.estimate.parameters[name] * scale, d.estimate.std_errors.get(name, np.nan) * scale
-        half = 1.96 * std if np.isfinite(std) else 0.0
+        half = Z_95 * std if np.isfinite(std) else 0.0
         ax.errorbar([value], [0], xerr=[[half], [half]], fmt="o", color="tab:blue", capsize=4)
         for bound in (p.lower, p.upper):
             if np.isfinite(bound) and abs(bound * scale - value) <= 3 * max(half, abs(value), 1e-9):

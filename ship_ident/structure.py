@@ -1,5 +1,10 @@
 """Model structure: a Nomoto base model plus effects.
 
+The base models are Nomoto's first- and second-order steering models (Nomoto, Taguchi, Honda and
+Hirano, "On the steering qualities of ships", 1957); the cubic yaw damping and the acceleration form
+below are Norrbin's nonlinear model (Norrbin, "Theory and observations on the use of a mathematical
+model for ship manoeuvring in deep and confined waters", 1970).
+
 The structure knows the parameters (names, units, physical bounds), how to
 simulate the model free from measured rudder (``simulate``) and how to
 write the ODE as an equation-error regression ``r = X w`` and map ``w``
@@ -381,8 +386,19 @@ class Structure:
 
 
 def fastest_time_constant(params: dict) -> float:
-    """The fastest time scale (s) of a base model's parameters in either form: the smallest of T, T1
-    and T2 given, or the fast pole's time of the acceleration form (1 / |a1|; min(m2, sqrt(m2 / |a1|)))."""
+    """The fastest time scale of a base model's parameters, in either form.
+
+    Parameters
+    ----------
+    params : dict
+        A parameter set (SI units) of the Nomoto or the acceleration form.
+
+    Returns
+    -------
+    float
+        The smallest of T, T1 and T2 given (s), or the fast pole's time of the acceleration form
+        (1 / |a1| first order; min(m2, sqrt(m2 / |a1|)), at least 1 ms, second order).
+    """
     nomoto = [params[n] for n in ("T", "T1", "T2") if n in params]
     if nomoto:
         return float(min(nomoto))
@@ -412,9 +428,25 @@ def nomoto_parameters(params: dict) -> dict:
 
 
 def nomoto_view(params: dict, covariance: np.ndarray | None, names: list, std_errors: dict) -> tuple[dict, dict]:
-    """``nomoto_parameters`` of an acceleration-form fit and their standard errors by the delta
-    method: through ``covariance`` of the parameters ``names`` where given, else as if the fitted
-    parameters' errors ``std_errors`` were independent."""
+    """K and the time constants of an acceleration-form fit, with standard errors by the delta method.
+
+    Parameters
+    ----------
+    params : dict
+        The fitted acceleration-form parameters (SI units).
+    covariance : ndarray or None
+        Covariance of the parameters ``names``; None: the errors taken as independent.
+    names : list of str
+        The fitted parameters, in the order of ``covariance``.
+    std_errors : dict
+        Their standard errors, used when ``covariance`` is None.
+
+    Returns
+    -------
+    values, errors : dict, dict
+        ``nomoto_parameters`` (1/s, s) and their standard errors; both empty where the hull has no
+        Nomoto form (course-unstable, or complex time constants).
+    """
     values = nomoto_parameters(params)
     if not values:
         return {}, {}
@@ -439,8 +471,23 @@ def nomoto_view(params: dict, covariance: np.ndarray | None, names: list, std_er
 
 
 def parse_effects(effects) -> tuple[str, ...]:
-    """Effect names from a comma-separated string or a sequence of names ("", None or (): no
-    effects); StructureError for a name not in ``effects.EFFECTS`` (naming those) or one listed twice."""
+    """Effect names from the command line or a configuration.
+
+    Parameters
+    ----------
+    effects : str, sequence of str or None
+        A comma-separated string or a sequence of names ("", None or (): no effects).
+
+    Returns
+    -------
+    tuple of str
+        The names, in the order given.
+
+    Raises
+    ------
+    StructureError
+        For a name not in ``effects.EFFECTS`` (naming those) or one listed twice.
+    """
     items = (effects or "").split(",") if isinstance(effects, str) or effects is None else effects
     names = tuple(str(e).strip() for e in items if str(e).strip())
     unknown = [e for e in names if e not in EFFECTS]
@@ -452,5 +499,19 @@ def parse_effects(effects) -> tuple[str, ...]:
 
 
 def require_samples(dataset: Dataset, minimum: int = 20) -> None:
+    """Refuse a dataset too short to fit.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data to fit.
+    minimum : int
+        Fewest samples accepted.
+
+    Raises
+    ------
+    DataError
+        With fewer samples.
+    """
     if dataset.n_samples < minimum:
         raise DataError(f"only {dataset.n_samples} samples; need at least {minimum}")

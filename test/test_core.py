@@ -161,5 +161,10 @@ def test_segments_are_cut_into_near_equal_or_whole_pieces_that_never_cross_a_gap
     segments = ((0, 100), (120, 125))
     assert cut_segments(segments, 30) == ((0, 33), (33, 67), (67, 100), (120, 125))
     assert cut_segments(segments, 30, min_samples=6) == ((0, 33), (33, 67), (67, 100))
-    assert cut_segments(segments, 30, whole=True) == ((0, 30), (30, 60), (60, 90))
-    assert cut_segments(segments, 30, whole=True, offset=15) == ((15, 45), (45, 75))
+    assert cut_segments(segments, 30, align="start", whole=True) == ((0, 30), (30, 60), (60, 90))
+    assert cut_segments(segments, 30, align="start", offset=15, whole=True) == ((15, 45), (45, 75))
+    assert cut_segments(segments, 30, align="start") == ((0, 30), (30, 60), (60, 90), (90, 100), (120, 125))
+    # the newest piece of each segment is whole, the first one shorter
+    assert cut_segments(segments, 30, align="end") == ((0, 10), (10, 40), (40, 70), (70, 100), (120, 125))
+    assert cut_segments(segments, 30, min_samples=6, align="end") == ((0, 10), (10, 40), (40, 70), (70, 100))
+    assert cut_segments(segments, 30, align="end", whole=True) == ((10, 40), (40, 70), (70, 100))

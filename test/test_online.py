@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from ship_ident.bench import vessels
-from ship_ident.change import ChangeDetector, covering_blocks, fit_gain, variance_change_point, with_held_errors
+from ship_ident.change import ChangeDetector, fit_gain, variance_change_point, with_held_errors
+from ship_ident.dataset import cut_segments
 from ship_ident.estimate_log import EstimateLog
 from ship_ident.estimators.base import Estimate
 from ship_ident.io import Sample
@@ -296,7 +297,7 @@ def test_the_followed_gain_carries_the_errors_of_the_hull_held_under_it():
     new = sim.dataset.slice(*np.searchsorted(sim.dataset.time, [240.0, 280.0]))
     truth = {name: sim.info["truth_after"][name] for name in structure.parameter_names}
     held_errors = {name: 0.1 * abs(truth[name]) for name in ("T1", "T2", "T3", "alpha", "delta_r")}
-    blocks = covering_blocks(new, int(round(30.0 / new.sample_time)))
+    blocks = cut_segments(new.segments, int(round(30.0 / new.sample_time)), min_samples=2, align="end")
     fitted, own = fit_gain(structure, truth, new, blocks, ("K",))
     widened = with_held_errors(structure, fitted, own, held_errors, new, blocks)
     predicted = math.sqrt(widened["K"] ** 2 - own["K"] ** 2)

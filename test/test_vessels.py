@@ -238,7 +238,8 @@ def test_k_and_t1_are_published_with_their_slide_along_the_cubic_damping():
     7.5 % off at +- 2.1 % and 3.1 %; online, T1 11 % off was published OK at +- 3.4 %. The cost
     hardly rises towards a larger damping, which a larger gain and a slower hull make up for: along
     alpha's profile K is known to about 4 % and T1 to about 7 %, which cover the truth."""
-    from ship_ident.online import TRUSTED_RELATIVE_ERRORS, cubic_damping_slides
+    from ship_ident.estimators.base import TRUSTED_RELATIVE_ERRORS
+    from ship_ident.online import cubic_damping_slides
 
     identifier, truth = _fed_identifier(3133699670, 1800.0, whole=True)
     window, config = identifier.window_dataset(1800.0), identifier.config

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..dataset import Dataset
 from ..estimators import DEFAULT_METHOD, make_estimator
+from ..estimators.base import Z_95
 from ..simulator import Noise, simulate
 from . import progress, register
 from .common import table
@@ -116,7 +117,7 @@ def run(quick: bool = False) -> dict:
                 runs[method][0].append({q: p[q] - truth[q] for q in QUANTITIES})
                 runs[method][1].append(
                     {
-                        q: bool(abs(p[q] - truth[q]) <= 1.96 * est.std_errors[q])
+                        q: bool(abs(p[q] - truth[q]) <= Z_95 * est.std_errors[q])
                         for q in QUANTITIES
                         if q in est.std_errors
                     }

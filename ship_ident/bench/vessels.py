@@ -65,7 +65,8 @@ import numpy as np
 
 from ..dataset import DataError, Dataset
 from ..estimators import make_estimator
-from ..online import TRUSTED_RELATIVE_ERRORS, OnlineIdentifier, run_schedule
+from ..estimators.base import TRUSTED_RELATIVE_ERRORS, Z_95
+from ..online import OnlineIdentifier, run_schedule
 from ..online_config import OnlineConfig
 from ..simulator import Noise, random_vessel, simulate
 from ..structure import StructureError
@@ -82,7 +83,7 @@ STEP_SHARE = 0.5  # share of cases with a change mid-run
 CHANGE = {"K": 0.7, "T1": 1.3}  # factors on the truth at the change
 WINDOWS_PER_RUN = 5.0  # run length in windows (quick: 3); a change at half of it
 # A window is well excited when its Cramer-Rao bound puts K and T1 within half the relative errors
-# the node trusts (online.TRUSTED_RELATIVE_ERRORS): no fit's published error can be smaller than the
+# the node trusts (estimators.base.TRUSTED_RELATIVE_ERRORS): no fit's published error can be smaller than the
 # bound, and model error and each fit's own scatter come on top (at the trust limit itself half of
 # the windows of a perfect estimator would be refused)
 WELL_EXCITED = {q: 0.5 * TRUSTED_RELATIVE_ERRORS[q] for q in ("K", "T1")}
@@ -312,7 +313,7 @@ def summarise(cases: list[dict]) -> dict:
                 truth = case["truth_after"] if refit["estimate_regime"] == "after" else case["truth"]
                 for p in PARAMETERS:
                     error = abs(refit["parameters"][p] - truth[p])
-                    covered[p].append(error <= 1.96 * refit["std_errors"].get(p, math.nan))
+                    covered[p].append(error <= Z_95 * refit["std_errors"].get(p, math.nan))
                 if not case["step"]:
                     for q in off:
                         error = abs(refit["parameters"][q] / truth[q] - 1.0)
@@ -323,7 +324,7 @@ def summarise(cases: list[dict]) -> dict:
                 if refit["time"] > case["change_time"]:
                     for q in followed:
                         error = abs(refit["parameters"][q] - case["truth_after"][q])
-                        followed[q].append(error <= 1.96 * refit["std_errors"].get(q, math.nan))
+                        followed[q].append(error <= Z_95 * refit["std_errors"].get(q, math.nan))
             if not case["step"] and _bound_excited(refit["crb"]):  # the bound alone, as before the profile
                 excited_by_bound += 1
                 rejected_by_bound += not published
@@ -498,7 +499,7 @@ def summarise_mmg(cases: list[dict]) -> dict:
         for p in PARAMETERS:
             median = float(np.median([r["parameters"][p] for r in published])) if published else math.nan
             covered[p] += [
-                abs(r["parameters"][p] - median) <= 1.96 * r["std_errors"].get(p, math.nan) for r in published
+                abs(r["parameters"][p] - median) <= Z_95 * r["std_errors"].get(p, math.nan) for r in published
             ]
     return {
         "cases": len(cases),

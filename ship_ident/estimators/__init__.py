@@ -21,17 +21,54 @@ class MethodError(ValueError):
 
 
 def method_names() -> list[str]:
+    """Every method ``make_estimator`` builds.
+
+    Returns
+    -------
+    list of str
+        Each regression's name, then with each refinement ("rlssvm", "rlssvm+oe", ...).
+    """
     return [n for base in ESTIMATORS for n in (base, *(f"{base}+{r}" for r in REFINEMENTS))]
 
 
 def regression_method(method: str) -> str:
-    """The regression that starts ``method``: ``rlssvm`` of ``rlssvm+oe`` (a regression: itself)."""
+    """The regression that starts a method.
+
+    Parameters
+    ----------
+    method : str
+        A method name, e.g. "rlssvm+oe".
+
+    Returns
+    -------
+    str
+        Its regression, "rlssvm" of "rlssvm+oe" (a regression: itself).
+    """
     return method.partition("+")[0]
 
 
 def make_estimator(method: str = DEFAULT_METHOD, explore: bool = True, **options) -> Estimator:
-    """Build an estimator from ``NAME``, ``NAME+oe`` or ``NAME+pem``; ``explore`` goes to the
-    refinement (``OutputError``), other options to the base estimator."""
+    """Build an estimator from its name.
+
+    Parameters
+    ----------
+    method : str
+        ``NAME``, ``NAME+oe`` or ``NAME+pem`` (``method_names``).
+    explore : bool
+        For the refinement (``OutputError``): a cold fit explores a range of starts.
+    **options
+        For the regression estimator.
+
+    Returns
+    -------
+    Estimator
+        The regression, or the output-error or prediction-error refinement started from it.
+
+    Raises
+    ------
+    MethodError
+        For an unknown name.
+    """
     base, _, refine = method.partition("+")
     if base not in ESTIMATORS:
         raise MethodError(f"unknown method {method!r}; choose from {', '.join(method_names())}")

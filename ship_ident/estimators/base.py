@@ -31,10 +31,51 @@ Z_95 = 1.96  # two-sided 95 % point of the normal distribution
 MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite the hull
 MIN_YAW_RATE_STD = np.radians(0.02)  # rad/s: an absolute floor under the noise-relative need
 HARDLY_MOVES_SNR = 2.0  # yaw-rate std below this many noise levels: it hardly moves
-# Relative standard errors (std / |value|) above which a window does not determine a parameter.
-# The acceleration form's gain b (b0) likewise; its linear damping a1 may be near zero
-# (a marginally stable hull), where no relative error is small: the window is judged by the others.
-MAX_RELATIVE_ERRORS = {"K": 0.1, "T": 0.3, "T1": 0.3, "b": 0.1, "b0": 0.1}
+# Relative standard errors (std / |value|) of the gain and the main time constant that three
+# decisions accept, side by side. The parameters that play each role, in every model form: the
+# gain K, the time constant T (T1), and in the acceleration form (a hull whose linear yaw damping is
+# weak or negative) the rudder's yaw acceleration b (b0) for K and the damping a1 for the time
+# constant. A limit of None leaves the role out of the decision.
+RELATIVE_ERROR_ROLES = (("K",), ("T", "T1"), ("b", "b0"), ("a1",))
+RELATIVE_ERROR_POLICIES = {
+    #                 K     T, T1  b, b0  a1
+    # a window that misses these does not determine the hull (its estimate is refused); a1 may be
+    # near zero (a marginally stable hull), where no relative error is small: judged by the others
+    "determined": (0.1, 0.3, 0.1, None),
+    # a new online estimate is trusted (OK) within these: a 10 % error is then 3 (K) or 2.5 (T1)
+    # standard errors away; a looser one that is determined is published as uncertain (WARN)
+    "trusted": (0.03, 0.04, 0.03, 0.1),
+    # the change detector's reference: a loosely known K travels with a cubic damping far off,
+    # which mispredicts the next turns of the same hull (a false change); T1 may be looser: steady
+    # turns determine K to 0.2 % but T1 only to 8-20 %, and such a reference still finds a change
+    "reference": (0.03, 0.2, None, None),
+}
+
+
+def relative_error_limits(policy: str) -> dict:
+    """The relative standard error limits of a decision, per parameter name.
+
+    Parameters
+    ----------
+    policy : str
+        A key of ``RELATIVE_ERROR_POLICIES``: "determined", "trusted" or "reference".
+
+    Returns
+    -------
+    dict
+        Parameter name -> largest accepted std / |value| (dimensionless).
+    """
+    return {
+        name: limit
+        for names, limit in zip(RELATIVE_ERROR_ROLES, RELATIVE_ERROR_POLICIES[policy])
+        if limit is not None
+        for name in names
+    }
+
+
+MAX_RELATIVE_ERRORS = relative_error_limits("determined")
+TRUSTED_RELATIVE_ERRORS = relative_error_limits("trusted")
+REFERENCE_RELATIVE_ERRORS = relative_error_limits("reference")
 
 
 @dataclass
@@ -49,8 +90,10 @@ class Solution:
 
 @dataclass(frozen=True)
 class Influence:
-    """Where in time a fit learnt its parameters: each free parameter's share of its variance
-    from each sample (squared rows of J (J'J)^-1, heading and yaw rate together; they sum to one),
+    """Where in time a fit learnt its parameters.
+
+    Each free parameter's share of its variance from each sample (squared rows of J (J'J)^-1,
+    heading and yaw rate together; they sum to one),
     kept as cumulative sums at the fit's sample times (s). Information is seldom spread evenly:
     a window of steps followed by a straight leg learnt T1 from the steps alone."""
 
@@ -165,7 +208,22 @@ def excitation_shortfall(
     buried in its noise while its heading, the integral, still determines the model). With an
     estimate's parameters and standard errors, the data are judged by what they determine: the gain
     and the main time constant within MAX_RELATIVE_ERRORS of their values, whatever the yaw-rate
-    spread."""
+    spread.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+    parameters, std_errors : dict or None
+        An estimate's parameters and standard errors (SI units), if there is one.
+    min_rudder_std : float
+        The rudder's smallest standard deviation that excites the hull (rad).
+
+    Returns
+    -------
+    str or None
+        Why the data fall short, or None when they suffice.
+    """
     ex = excitation(dataset)
     still = ex["yaw_rate_std"] < ex["yaw_rate_std_needed"] and ex["heading_std"] < ex["heading_std_needed"]
     if ex["rudder_std"] < min_rudder_std or still:
@@ -189,8 +247,22 @@ def excitation_shortfall(
 
 
 def loose_parameters(parameters: dict, std_errors: dict, limits: dict) -> tuple[list, str]:
-    """The parameters of ``limits`` whose relative standard error (std / |value|) exceeds its
-    limit, and their figures ('K 0.21 +- 0.03 (14 %, need <= 10 %), ...')."""
+    """The parameters whose relative standard error exceeds its limit.
+
+    Parameters
+    ----------
+    parameters, std_errors : dict
+        Values and standard errors (SI units).
+    limits : dict
+        Largest std / |value| per parameter (``relative_error_limits``); the others are not judged.
+
+    Returns
+    -------
+    names : list of str
+        The parameters beyond their limits.
+    figures : str
+        Their figures, 'K 0.21 +- 0.03 (14 %, need <= 10 %), ...'.
+    """
     relative = {
         name: std_errors.get(name, np.inf) / max(abs(parameters[name]), 1e-12) for name in limits if name in parameters
     }
@@ -208,15 +280,51 @@ def excitation_flags(dataset: Dataset, parameters: dict | None = None, std_error
 
 
 def fit_substeps(h: float, params: dict) -> int:
-    """RK4 substeps per sample for fitting and fit figures: step at most 2/3 of the fastest
-    time constant (free-run error ~1e-5 deg on seed 001's vessel, far below sensor noise)."""
+    """RK4 substeps per sample for fitting and fit figures.
+
+    Each step is at most 2/3 of the fastest time constant (free-run error ~1e-5 deg on seed 001's
+    vessel, far below sensor noise).
+
+    Parameters
+    ----------
+    h : float
+        Sample time (s).
+    params : dict
+        The parameters (``fastest_time_constant``).
+
+    Returns
+    -------
+    int
+        Substeps per sample.
+    """
     return substeps_for(h, fastest_time_constant(params), 1.5)
 
 
 def finish_estimate(
     structure: Structure, dataset: Dataset, method: str, params: dict, std_errors: dict, flags: list, info: dict
 ) -> Estimate:
-    """Add the in-sample free-run fit, excitation facts and flags."""
+    """An estimate with its in-sample free-run fit, excitation facts and flags.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model.
+    dataset : Dataset
+        The data fitted.
+    method : str
+        The estimator's name.
+    params, std_errors : dict
+        The fitted parameters and their standard errors (SI units).
+    flags : list of str
+        The estimator's flags; low excitation and a diverged free run are added.
+    info : dict
+        The estimator's facts.
+
+    Returns
+    -------
+    Estimate
+        The estimate over the dataset's time span.
+    """
     psi_sim, r_sim = structure.simulate(params, dataset, substeps=fit_substeps(dataset.sample_time, params))
     fit = free_run_fit(dataset.heading, dataset.yaw_rate, psi_sim, r_sim)
     flags = list(dict.fromkeys(flags + excitation_flags(dataset) + (["diverged"] if fit["diverged"] else [])))
@@ -286,16 +394,43 @@ class RegressionEstimator(Estimator):
 
 
 def scaled_inverse(normal: np.ndarray) -> np.ndarray:
-    """The inverse of a normal matrix J'J, inverted with its diagonal scaled to one (columns of
-    very different sizes, a yaw-rate state's and alpha's 1e-7 of it, would otherwise lose the
-    weak direction to rounding, and a pseudo-inverse would give it no error at all);
-    LinAlgError when it is singular."""
+    """The inverse of a normal matrix J'J, its diagonal scaled to one.
+
+    Unscaled, columns of very different sizes (a yaw-rate state's and alpha's 1e-7 of it) would lose
+    the weak direction to rounding, and a pseudo-inverse would give it no error at all.
+
+    Parameters
+    ----------
+    normal : ndarray
+        A symmetric positive (semi-)definite matrix J'J.
+
+    Returns
+    -------
+    ndarray
+        Its inverse.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        When it is singular.
+    """
     scale = np.sqrt(np.maximum(np.diag(normal), 1e-300))
     return np.linalg.inv(normal / np.outer(scale, scale)) / np.outer(scale, scale)
 
 
 def column_scales(X: np.ndarray) -> np.ndarray:
-    """RMS of each column of X (1 for an all-zero column): X / column_scales(X) has unit-RMS columns."""
+    """The RMS of each column: X / column_scales(X) has unit-RMS columns.
+
+    Parameters
+    ----------
+    X : ndarray
+        A regression matrix, samples by columns.
+
+    Returns
+    -------
+    ndarray
+        Each column's RMS (1 for an all-zero column).
+    """
     scale = np.sqrt(np.mean(X**2, axis=0))
     return np.where(scale > 0, scale, 1.0)
 

@@ -1,6 +1,9 @@
 """Least squares and the LS-SVM family with a linear kernel.
 
-LS-SVM (Suykens): min 1/2 w'w + gamma/2 sum v_i e_i^2, e_i = y_i - x_i'w - b.
+LS-SVM (Suykens and Vandewalle, "Least squares support vector machine classifiers", 1999):
+min 1/2 w'w + gamma/2 sum v_i e_i^2, e_i = y_i - x_i'w - b. Seed 001 is "Identification of Unmanned
+Surface Vehicle Maneuverability Parameters Based on Improved WLSSVM" (Journal of Unmanned Undersea
+Systems, doi:10.11993/j.issn.2096-3920.2022-0044), whose vessel and Table 2 the tests use.
 
 * ``lssvm`` is seed 001's original form: the bias b is in the model and the
   constant regressor of the rudder offset sits inside the kernel. Its dual
@@ -33,7 +36,27 @@ DUAL_MAX_SAMPLES = 1500  # the N x N dual (O(N^3)) is solved up to this size; be
 
 
 def ridge_primal(X: np.ndarray, y: np.ndarray, gamma: float, weights: np.ndarray | None = None):
-    """Weighted ridge on unit-RMS columns, no bias: returns w (original units) and (X'VX + I/gamma)^-1."""
+    """Weighted ridge regression on unit-RMS columns, without a bias.
+
+    Parameters
+    ----------
+    X : ndarray
+        Regression matrix, samples by columns.
+    y : ndarray
+        Targets.
+    gamma : float
+        Regularisation: the ridge term is 1 / (2 gamma) w'w on the scaled columns.
+    weights : ndarray or None
+        Per-sample weights v (default 1).
+
+    Returns
+    -------
+    w : ndarray
+        Coefficients, in the units of the original columns.
+    covariance : ndarray
+        A^-1 X_s' V^2 X_s A^-1 with A = X_s' V X_s + I / gamma, in the original columns' units: the
+        coefficients' covariance per unit noise variance.
+    """
     scale = column_scales(X)
     Xs = X / scale
     v = np.ones(len(y)) if weights is None else weights
@@ -54,7 +77,26 @@ def lssvm_dual_bias_free(X: np.ndarray, y: np.ndarray, gamma: float, weights: np
 
 
 def lssvm_dual_with_bias(X: np.ndarray, y: np.ndarray, gamma: float) -> tuple[np.ndarray, float, np.ndarray]:
-    """Seed 001's dual with bias: returns w, b and the dual variables a (sum(a) == 0)."""
+    """Seed 001's LS-SVM dual with a bias.
+
+    Parameters
+    ----------
+    X : ndarray
+        Regression matrix, samples by columns.
+    y : ndarray
+        Targets.
+    gamma : float
+        Regularisation.
+
+    Returns
+    -------
+    w : ndarray
+        Coefficients (the weight of a constant column is exactly 0).
+    b : float
+        The bias.
+    a : ndarray
+        The dual variables (sum(a) == 0).
+    """
     n = len(y)
     M = np.empty((n + 1, n + 1))
     M[0, 0] = 0.0

@@ -58,20 +58,20 @@ import numpy as np
 from scipy import sparse
 
 from ..dataset import Dataset, cut_segments
+from ..effects import BOUND_SHARE, yaw_time_constant
 from ..noise import robust_std
 from ..structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
+from .shooting import ShootingProblem
 
 MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
 MIN_INTERVAL_SAMPLES = 50  # shorter intervals are not split further
 VALLEY_SHARES = (0.03, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the starts along the T2 = T3 valley (nomoto2)
 VALLEY_HELD_ITERATIONS = 8  # search iterations at each of them with T2 held
-AT_BOUND_SHARE = 0.01  # within 1 % of a bound's value is on it (T1 = 999 s of 1000 s: a search
-# running off along the K, T1, alpha -> infinity ridge, not a hull)
 RESCUE_ITERATIONS_FACTOR = 2  # a search not converged in max_iterations goes on this many times longer
 RESCUE_MAX_COST = 4.0  # ... when its mean squared residual is within this many noise variances
-SHOOTING_SPAN = 3.0  # main time constants per shooting interval at least (``shooting_length``)
+SHOOTING_SPAN = 3.0  # yaw time constants per shooting interval at least (``shooting_length``)
 RESHOOT_RATIO = 1.5  # a fit whose hull wants intervals this much longer than it used is searched again on them
 SPARSE_INTERVALS = 12  # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
 TIME_CONSTANT_STARTS = (1.0, 3.0, 10.0, 30.0, 100.0)  # s, main time constants also started from
@@ -174,11 +174,12 @@ def _dense(a) -> np.ndarray:
 
 
 def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> tuple[np.ndarray, ...]:
-    """Heteroscedasticity-and-autocorrelation-consistent (Newey-West) standard errors of the
-    first ``p`` unknowns: bread (J'J)^-1 (``scaled_inverse``), meat the Bartlett-weighted long-run covariance of
-    the per-sample scores J_k' f_k (heading and yaw-rate rows of one sample summed), lags up
-    to ``bandwidth`` samples (one shooting interval: residuals of different intervals are
-    nearly independent). Only the parameter rows of the bread are needed, so the long-run
+    """Heteroscedasticity-and-autocorrelation-consistent standard errors (Newey and West, "A simple,
+    positive semi-definite, heteroskedasticity and autocorrelation consistent covariance matrix",
+    1987) of the first ``p`` unknowns: bread (J'J)^-1 (``scaled_inverse``), meat the
+    Bartlett-weighted long-run covariance of the per-sample scores J_k' f_k (heading and yaw-rate
+    rows of one sample summed), lags up to ``bandwidth`` samples (one shooting interval: residuals
+    of different intervals are nearly independent). Only the parameter rows of the bread are needed, so the long-run
     covariance is taken of the p-dimensional projected scores: u' W u with W the Toeplitz
     matrix of the Bartlett weights, W u one convolution (FFT for long lag windows), so the
     cost is linear in the samples. ``J`` may be a scipy sparse matrix. Also returns the plain
@@ -213,6 +214,91 @@ def huber_weights(start_residual: np.ndarray, n_samples: int) -> np.ndarray:
         scale = robust_std(e) or 1.0
         weights[half] = np.minimum(1.0, HUBER_THRESHOLD * scale / np.maximum(np.abs(e), 1e-300))
     return np.sqrt(weights)
+
+
+class _Search:
+    """The weighted free-run residuals of a ``ShootingProblem`` and their Jacobian, as the output-error
+    search sees them: each sample's heading and yaw-rate error through the search's weighting
+    ``weigh`` (noise model) and the Huber weights ``robust``; the unknowns bounded by ``lo``, ``hi``.
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+        The unknowns and the free runs.
+    lower, upper : ndarray
+        Bounds of the parameters (the blocks' states are free).
+    yaw_rate_bias : float
+        The yaw-rate sensor's reading at rest (rad/s), taken off the blocks' initial yaw rates.
+    """
+
+    def __init__(self, problem: ShootingProblem, lower: np.ndarray, upper: np.ndarray, yaw_rate_bias: float):
+        self.problem = problem
+        self.upper = upper
+        self.states0 = problem.initial_states(yaw_rate_bias)
+        self.lo = np.concatenate([lower, np.full(self.states0.size, -np.inf)])
+        self.hi = np.concatenate([upper, np.full(self.states0.size, np.inf)])
+        n = problem.dataset.n_samples
+        self.columns = problem.columns(np.concatenate([problem.owner, problem.owner]))  # rows: heading, yaw rate
+        self.robust = np.ones(2 * n)  # Huber weights (square roots), fixed at the start
+        self.weigh = None  # (psi_err, r_err) -> residual vector: the chosen start's weighting
+        self.simulations = 0
+
+    def substeps(self, x: np.ndarray) -> int:
+        """RK4 substeps per sample at the parameters of the unknowns ``x`` (``fit_substeps``)."""
+        return fit_substeps(self.problem.dataset.sample_time, self.problem.unpack(x)[0])
+
+    def residuals(self, points, substeps: int, weighs=None) -> np.ndarray:
+        """Weighted residual vectors of several points (rows), simulated in one compiled call;
+        ``weighs``: each point's own weighting (default: the search's); a run that diverged gets
+        residuals of 1e6."""
+        dataset = self.problem.dataset
+        self.simulations += len(points)
+        psi, r = self.problem.simulate(points, substeps)
+        out = np.full((len(points), 2 * dataset.n_samples), 1e6)
+        for k in range(len(points)):
+            psi_err, r_err = psi[k] - dataset.heading, r[k] - dataset.yaw_rate
+            if np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err)):
+                out[k] = self.robust * (weighs[k] if weighs else self.weigh)(psi_err, r_err)
+        return out
+
+    def residual(self, x: np.ndarray) -> np.ndarray:
+        """The weighted residual vector at the unknowns ``x``."""
+        return self.residuals([x], self.substeps(x))[0]
+
+    def jacobian(self, x: np.ndarray, f0: np.ndarray, chosen=None):
+        """Forward differences (``ShootingProblem``), all simulated in one call at the substeps of
+        ``x`` whose residuals are ``f0``; the columns of the parameters not ``chosen`` (default: all)
+        are zero."""
+        problem = self.problem
+        chosen = tuple(range(problem.n_params)) if chosen is None else chosen
+        points, steps = problem.difference_points(x, self.upper, chosen)
+        diff = self.residuals(points, self.substeps(x)) - f0
+        return problem.jacobian(x, points, steps, diff, chosen, self.columns, len(problem.blocks) > SPARSE_INTERVALS)
+
+    def polished(self, x: np.ndarray, weighting, gain_first: list, linear: list) -> tuple[np.ndarray, float]:
+        """``x`` after up to START_POLISH_STEPS Gauss-Newton steps on the unknowns its free run is
+        (nearly) linear in (``gain_first`` at the first step, ``linear`` after), each kept while it
+        lowers the cost under ``weighting`` and the start's own Huber weights (sensor spikes steer
+        neither the steps nor the choice), and that cost."""
+        p = self.problem.n_params
+        self.weigh, self.robust = weighting, np.ones(2 * self.problem.dataset.n_samples)
+        self.robust = huber_weights(self.residual(x), self.problem.dataset.n_samples)
+        f = self.residual(x)
+        for number in range(START_POLISH_STEPS):
+            unknowns = linear if number else gain_first
+            Jc = self.jacobian(x, f, tuple(i for i in unknowns if i < p))[:, unknowns]
+            try:
+                step = -scaled_inverse(_dense(Jc.T @ Jc)) @ np.asarray(Jc.T @ f).ravel()
+            except np.linalg.LinAlgError:
+                break
+            moved = x.copy()
+            moved[unknowns] += step
+            moved = np.clip(moved, self.lo, self.hi)
+            f_moved = self.residual(moved)
+            if not f_moved @ f_moved < f @ f:
+                break
+            x, f = moved, f_moved
+        return x, float(f @ f)
 
 
 class OutputError(Estimator):
@@ -279,7 +365,7 @@ class OutputError(Estimator):
 
     def shooting_length(self, dataset: Dataset, params: dict) -> float:
         """Seconds per shooting interval for a hull near ``params``: ``shooting_s``, or
-        SHOOTING_SPAN main time constants when longer (``explore`` fits; the diagnosis's figures
+        SHOOTING_SPAN yaw time constants (``yaw_time_constant``) when longer (``explore`` fits; the diagnosis's figures
         were measured on fixed intervals), but no longer than the rudder-noise walk
         time s_psi^2 / ((K s_delta)^2 h) (``walk_limited``), where the heading drift the free run
         accumulates from the rudder's noise reaches the heading noise (30 s on seed 001's hull).
@@ -287,7 +373,9 @@ class OutputError(Estimator):
         ship's K (T1 66 s, prediction error) scattered 1.3 % RMS over noise seeds on 120 s
         intervals, 8.8 % on 50 s ones, 0.4 % on 200 s ones, at its standard error."""
         length = self.shooting_s
-        main = abs(params.get("T1", params.get("T", 0.0)))
+        if "K" not in params:  # the acceleration form: a course-unstable hull's free run grows as
+            return length  # exp(|a1| t), and intervals of several of its times would diverge
+        main = yaw_time_constant(params)
         if self.shooting_span * main > length:
             length = self.shooting_span * main
             if self.walk_limited:
@@ -381,127 +469,64 @@ class OutputError(Estimator):
         parameters named in ``held`` stay at ``first``'s values; ``weighted_at`` (parameters): every
         start weighed with the noise model and Huber weights there (``fit_held``)."""
         names = structure.free_names
-        p = len(names)
         params0 = structure.clip_to_bounds(first.parameters)
         lower, upper = held_bounds(*structure.bounds(names, dataset), {names.index(n): params0[n] for n in held})
-        h = dataset.sample_time
-        s_psi = dataset.noise_std("heading")
-        s_r = dataset.noise_std("yaw_rate")
         hull = dict(params0, **starts[0]) if starts else params0  # a given start knows the hull best
         shooting_s = self.shooting_length(dataset, hull)  # each interval restarts from its own fitted state
-        intervals = shooting_intervals(dataset.segments, int(round(shooting_s / h)))
-        shots = replace(dataset, segments=intervals)
-        n_state = 3 if structure.order == 2 else 2
-        bias0 = structure.yaw_rate_bias(params0)
-        states0 = np.array([[dataset.heading[a], dataset.yaw_rate[a] - bias0, 0.0][:n_state] for a, _ in intervals])
-        fixed = {n: params0[n] for n in structure.fixed_names}
+        intervals = shooting_intervals(dataset.segments, int(round(shooting_s / dataset.sample_time)))
+        problem = ShootingProblem(structure, dataset, intervals, names, {n: params0[n] for n in structure.fixed_names})
+        search = _Search(problem, lower, upper, structure.yaw_rate_bias(params0))
+        x0 = self._best_start(search, first, params0, starts, explore, weighted_at)
+        if weighted_at is not None:  # the Huber weights of that point, its states from the data
+            at = np.concatenate([[structure.clip_to_bounds(weighted_at)[n] for n in names], search.states0.ravel()])
+            search.robust = huber_weights(search.residual(at), dataset.n_samples)
+        else:
+            search.robust = huber_weights(search.residual(x0), dataset.n_samples)
+        result, iterations = self._minimise(search, x0)
+        info = {
+            "start": first.method,
+            "start_parameters": first.parameters,
+            "noise_heading": dataset.noise_std("heading"),
+            "noise_yaw_rate": dataset.noise_std("yaw_rate"),
+            "iterations": iterations,
+            "simulations": search.simulations,
+            "shooting_intervals": len(intervals),
+            "shooting_s": shooting_s,
+            "cost": float(result.fun @ result.fun),  # squared weighted residuals (-2 log-likelihood + const)
+            "gauss_newton_std": None,  # with the standard errors (``_estimate``)
+            "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
+            "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
+        }
+        return self._estimate(problem, first, result, info)
 
-        def unpack(x):
-            params = dict(fixed)
-            params.update(zip(names, x[:p]))
-            states = x[p:].reshape(-1, n_state)
-            initial = [(s[0], s[1], s[2] if n_state == 3 else 0.0) for s in states]
-            return params, initial
-
-        simulations = 0
-        robust = np.ones(2 * dataset.n_samples)  # Huber weights (square roots), fixed at the start
-
-        def residuals(points, substeps, weighs=None):
-            """Weighted residual vectors of several points (rows), simulated in one compiled call;
-            ``weighs``: each point's own weighting (default: the search's)."""
-            nonlocal simulations
-            simulations += len(points)
-            runs = [unpack(x) for x in points]
-            psi, r = structure.simulate_runs([q for q, _ in runs], shots, [i for _, i in runs], substeps)
-            out = np.full((len(points), 2 * dataset.n_samples), 1e6)
-            for k in range(len(points)):
-                psi_err, r_err = psi[k] - dataset.heading, r[k] - dataset.yaw_rate
-                if np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err)):
-                    out[k] = robust * (weighs[k] if weighs else weigh)(psi_err, r_err)
-            return out
-
-        def residual(x):
-            return residuals([x], fit_substeps(h, unpack(x)[0]))[0]
-
-        owner = np.zeros(dataset.n_samples, dtype=np.int64)  # shooting interval of each sample
-        for i, (a, b) in enumerate(intervals):
-            owner[a:b] = i
-        columns = np.empty((2 * dataset.n_samples, p + n_state), dtype=np.int64)  # of J's nonzeros
-        columns[:, :p] = np.arange(p)
-        columns[:, p:] = p + n_state * np.concatenate([owner, owner])[:, None] + np.arange(n_state)
-
-        def jacobian(x, f0, chosen=tuple(range(p))):
-            """Forward differences, all simulated in one call at the substeps of ``x``: one run per
-            parameter (of ``chosen``; the others' columns are zero), one per state component (the
-            intervals' states touch disjoint rows)."""
-            steps = 1e-6 * np.maximum(np.abs(x), 1e-2)
-            points = []
-            for j in chosen:
-                xs = x.copy()
-                xs[j] += steps[j] if x[j] + steps[j] <= upper[j] else -steps[j]
-                points.append(xs)
-            for c in range(n_state):
-                xs = x.copy()
-                xs[p + c :: n_state] += steps[p + c :: n_state]
-                points.append(xs)
-            diff = residuals(points, fit_substeps(h, unpack(x)[0])) - f0
-            values = np.zeros(columns.shape)
-            m, varied = len(chosen), list(chosen)
-            values[:, varied] = (diff[:m] / (np.array(points)[:, varied].diagonal() - x[varied])[:, None]).T
-            values[:, p:] = diff[m:].T / steps[columns[:, p:]]
-            if len(intervals) > SPARSE_INTERVALS:
-                row_starts = np.arange(0, values.size + 1, p + n_state)
-                return sparse.csr_matrix((values.ravel(), columns.ravel(), row_starts), shape=(len(f0), len(x)))
-            J = np.zeros((len(f0), len(x)))
-            np.put_along_axis(J, columns, values, axis=1)
-            return J
-
-        lo = np.concatenate([lower, np.full(states0.size, -np.inf)])
-        hi = np.concatenate([upper, np.full(states0.size, np.inf)])
+    def _best_start(
+        self,
+        search: _Search,
+        first: Estimate,
+        params0: dict,
+        starts: tuple,
+        explore: bool,
+        weighted_at: dict | None,
+    ) -> np.ndarray:
+        """The unknowns of the start that simulates closest to the data (``_refine``), its
+        weighting set as the search's; each start judged with the noise model at its own parameters
+        (-2 log-likelihood: one fixed at a regression start that missed the time scale favours
+        starts near it) and with the unknowns its free run is linear in (gain, rudder offset,
+        interval states) fitted."""
+        problem, structure, dataset = search.problem, search.problem.structure, search.problem.dataset
+        names, p, h = problem.names, problem.n_params, dataset.sample_time
+        s_psi, s_r = dataset.noise_std("heading"), dataset.noise_std("yaw_rate")
         guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0, explore) + [
             np.array([structure.clip_to_bounds(dict(params0, **s))[n] for n in names]) for s in starts
         ]
-        points = [np.clip(np.concatenate([g, states0.ravel()]), lo, hi) for g in guesses]
-        substeps = max(fit_substeps(h, unpack(x)[0]) for x in points)
-        # each start judged with the noise model at its own parameters (-2 log-likelihood: one fixed
-        # at a regression start that missed the time scale favours starts near it) and with the
-        # unknowns its free run is linear in (gain, rudder offset, interval states) fitted
-        if weighted_at is None:
-            weighings = [
-                self.residual_weighting(structure, dataset, unpack(x)[0], s_psi, s_r, intervals) for x in points
-            ]
-        else:
-            weighings = [self.residual_weighting(structure, dataset, weighted_at, s_psi, s_r, intervals)] * len(points)
-        linear = [names.index(n) for n in LINEAR_NAMES if n in names] + list(range(p, p + states0.size))
+        points = [np.clip(np.concatenate([g, search.states0.ravel()]), search.lo, search.hi) for g in guesses]
+        substeps = max(fit_substeps(h, problem.unpack(x)[0]) for x in points)
+        at = [problem.unpack(x)[0] for x in points] if weighted_at is None else [weighted_at] * len(points)
+        weighings = [self.residual_weighting(structure, dataset, q, s_psi, s_r, problem.blocks) for q in at]
+        linear = [names.index(n) for n in LINEAR_NAMES if n in names] + list(range(p, problem.size))
         # the first step holds the rudder offset: at a gain far off its column (the gain times the
         # offset) is tiny and the step would send the offset to its bound, losing a slow ship's start
         gain_first = [i for i in linear if i >= p or names[i] != "delta_r"]
-
-        def polished(x, weighting):
-            """``x`` after up to START_POLISH_STEPS Gauss-Newton steps on the unknowns its free run
-            is (nearly) linear in, each kept while it lowers the cost under ``weighting`` and the
-            start's own Huber weights (sensor spikes steer neither the steps nor the choice), and
-            that cost."""
-            nonlocal weigh, robust
-            weigh, robust = weighting, np.ones(2 * dataset.n_samples)
-            robust = huber_weights(residual(x), dataset.n_samples)
-            f = residual(x)
-            for number in range(START_POLISH_STEPS):
-                unknowns = linear if number else gain_first
-                Jc = jacobian(x, f, tuple(i for i in unknowns if i < p))[:, unknowns]
-                try:
-                    step = -scaled_inverse(_dense(Jc.T @ Jc)) @ np.asarray(Jc.T @ f).ravel()
-                except np.linalg.LinAlgError:
-                    break
-                moved = x.copy()
-                moved[unknowns] += step
-                moved = np.clip(moved, lo, hi)
-                f_moved = residual(moved)
-                if not f_moved @ f_moved < f @ f:
-                    break
-                x, f = moved, f_moved
-            return x, float(f @ f)
-
         # a given start (a nearby window's estimate) is polished too when exploring is on (the
         # diagnosis, which starts candidates from other models' fits, keeps its figures without):
         # the interval states taken from the data (yaw acceleration 0) suit a hull whose rudder
@@ -512,65 +537,85 @@ class OutputError(Estimator):
         else:
             first_polished = len(guesses) - len(starts) if self.explore else len(points)
         plain = points[:first_polished]
-        costs = list(np.sum(residuals(plain, substeps, [w for w, _ in weighings]) ** 2, axis=1)) if plain else []
+        costs = list(np.sum(search.residuals(plain, substeps, [w for w, _ in weighings]) ** 2, axis=1)) if plain else []
         for i in range(first_polished, len(points)):
-            points[i], cost = polished(points[i], weighings[i][0])
+            points[i], cost = search.polished(points[i], weighings[i][0], gain_first, linear)
             costs.append(cost)
-        robust = np.ones(2 * dataset.n_samples)
+        search.robust = np.ones(2 * dataset.n_samples)
         best = int(np.argmin(costs + dataset.n_samples * np.array([d for _, d in weighings])))
-        x0, weigh = points[best], weighings[best][0]
+        search.weigh = weighings[best][0]
+        return points[best]
 
-        def along_valley(x):
-            """The best of ``x`` and its variants along the T2 = T3 valley, each with the yaw
-            accelerations of the intervals' starts back at zero (the ones fitted with a small T2
-            mean nothing with a larger one) and, with ``explore``, searched with T2 held
-            (VALLEY_HELD_ITERATIONS: the gain, T1 and alpha follow T2 up the valley, which a variant
-            alone does not, and a search from a small T2 crawls along the flat valley for many
-            iterations; the diagnosis keeps the variants alone, its figures were measured so)."""
-            variants = self._valley_starts(names, x[:p])
-            if not variants:
-                return x, 0
-            states = x[p:].copy()
-            states[2::n_state] = states0[:, 2]
-            points = [x] + [np.clip(np.concatenate([g, states]), lo, hi) for g in variants]
-            if not self.explore:
-                substeps = max(fit_substeps(h, unpack(q)[0]) for q in points)
-                return points[int(np.argmin(np.sum(residuals(points, substeps) ** 2, axis=1)))], 0
-            t2 = names.index("T2")
-            best, best_cost, iterations = x, float(np.sum(residual(x) ** 2)), 0
-            for point in points[1:]:
-                held_lo, held_hi = held_bounds(lo, hi, {t2: point[t2]})
-                found = bounded_levenberg_marquardt(residual, jacobian, point, held_lo, held_hi, VALLEY_HELD_ITERATIONS)
-                iterations += found.iterations
-                if found.fun @ found.fun < best_cost:
-                    best, best_cost = found.x, float(found.fun @ found.fun)
-            return best, iterations
-
-        if weighted_at is not None:  # the Huber weights of that point, its states from the data
-            at = np.concatenate([[structure.clip_to_bounds(weighted_at)[n] for n in names], states0.ravel()])
-            robust = huber_weights(residual(at), dataset.n_samples)
-        else:
-            robust = huber_weights(residual(x0), dataset.n_samples)
-        result = bounded_levenberg_marquardt(residual, jacobian, x0, lo, hi, self.max_iterations)
+    def _minimise(self, search: _Search, x0: np.ndarray) -> tuple[LeastSquaresResult, int]:
+        """The bounded search from ``x0``, and its iterations; a model that explains the data to near
+        its noise but did not converge, crawling along a valley (up the T2 = T3 valley from its
+        foot: jump along it first; anywhere when exploring is on: the diagnosis keeps its figures
+        without), searched on gently (a model that misses the motion, residuals far above the
+        noise, is not helped by more search)."""
+        p = search.problem.n_params
+        result = bounded_levenberg_marquardt(
+            search.residual, search.jacobian, x0, search.lo, search.hi, self.max_iterations
+        )
         iterations = result.iterations
-        in_valley_foot = self._in_valley_foot(names, result.x[:p])
+        in_valley_foot = self._in_valley_foot(search.problem.names, result.x[:p])
         if (
             not result.success
             and (in_valley_foot or self.explore)
             and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun)
         ):
-            # a model that explains the data to near its noise, crawling along a valley (up the
-            # T2 = T3 valley from its foot: jump along it first; anywhere when exploring is on:
-            # the diagnosis keeps its figures without): search on gently (a model that misses the
-            # motion, residuals far above the noise, is not helped by more search)
-            start, valley_iterations = along_valley(result.x) if in_valley_foot else (result.x, 0)
+            start, valley_iterations = self._along_valley(search, result.x) if in_valley_foot else (result.x, 0)
             result = bounded_levenberg_marquardt(
-                residual, jacobian, start, lo, hi, RESCUE_ITERATIONS_FACTOR * self.max_iterations, gentle=True
+                search.residual,
+                search.jacobian,
+                start,
+                search.lo,
+                search.hi,
+                RESCUE_ITERATIONS_FACTOR * self.max_iterations,
+                gentle=True,
             )
             iterations += valley_iterations + result.iterations
-        params, _ = unpack(result.x)
+        return result, iterations
+
+    def _along_valley(self, search: _Search, x: np.ndarray) -> tuple[np.ndarray, int]:
+        """The best of ``x`` and its variants along the T2 = T3 valley, each with the yaw
+        accelerations of the intervals' starts back at zero (the ones fitted with a small T2
+        mean nothing with a larger one) and, with ``explore``, searched with T2 held
+        (VALLEY_HELD_ITERATIONS: the gain, T1 and alpha follow T2 up the valley, which a variant
+        alone does not, and a search from a small T2 crawls along the flat valley for many
+        iterations; the diagnosis keeps the variants alone, its figures were measured so); and the
+        search iterations spent."""
+        problem = search.problem
+        names, p, n_state = problem.names, problem.n_params, problem.n_state
+        variants = self._valley_starts(names, x[:p])
+        if not variants:
+            return x, 0
+        states = x[p:].copy()
+        states[2::n_state] = search.states0[:, 2]
+        points = [x] + [np.clip(np.concatenate([g, states]), search.lo, search.hi) for g in variants]
+        if not self.explore:
+            substeps = max(fit_substeps(problem.dataset.sample_time, problem.unpack(q)[0]) for q in points)
+            return points[int(np.argmin(np.sum(search.residuals(points, substeps) ** 2, axis=1)))], 0
+        t2 = names.index("T2")
+        best, best_cost, iterations = x, float(np.sum(search.residual(x) ** 2)), 0
+        for point in points[1:]:
+            held_lo, held_hi = held_bounds(search.lo, search.hi, {t2: point[t2]})
+            found = bounded_levenberg_marquardt(
+                search.residual, search.jacobian, point, held_lo, held_hi, VALLEY_HELD_ITERATIONS
+            )
+            iterations += found.iterations
+            if found.fun @ found.fun < best_cost:
+                best, best_cost = found.x, float(found.fun @ found.fun)
+        return best, iterations
+
+    def _estimate(self, problem: ShootingProblem, first: Estimate, result: LeastSquaresResult, info: dict) -> Estimate:
+        """The estimate at the search's end ``result``: standard errors with the residuals'
+        correlation (Newey-West), flags of parameters on a physical bound, an unconverged search
+        and repeated time constants, and ``info`` with the Gauss-Newton errors."""
+        structure, dataset, names = problem.structure, problem.dataset, problem.names
+        p = problem.n_params
+        params, _ = problem.unpack(result.x)
         std, gauss_newton, shares, covariance = parameter_std_errors(
-            result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(intervals)
+            result.jac, result.fun, dataset.n_samples, p, bandwidth=self.bandwidth(problem.blocks)
         )
         std_errors = {n: float(s) for n, s in zip(names, std)}
         cumulative = dict(zip(names, np.cumsum(shares, axis=0).T))
@@ -582,14 +627,8 @@ class OutputError(Estimator):
             and not f.startswith("at_bound:")
             and f not in ("complex_time_constants", "diverged")
         ]  # the start's, not this fit's
-        physical = structure.bounds(names)  # the data's stability limit of alpha is no physical bound
-        at_bound = [
-            n
-            for n, v, lo, hi in zip(names, result.x, *physical)
-            if any(
-                np.isfinite(b) and np.isclose(v, b, rtol=AT_BOUND_SHARE, atol=1e-6 * max(1, abs(b))) for b in (lo, hi)
-            )
-        ]
+        # the physical bounds: the data's stability limit of alpha is no physical bound
+        at_bound = [n for n, v in zip(names, result.x) if structure.parameter(n).bound_reached(v) is not None]
         flags += [f"at_bound:{n}" for n in at_bound]
         if not result.success:
             flags.append("oe_not_converged")
@@ -597,25 +636,12 @@ class OutputError(Estimator):
             params["T1"], params["T2"] = params["T2"], params["T1"]
             std_errors["T1"], std_errors["T2"] = std_errors["T2"], std_errors["T1"]
             cumulative["T1"], cumulative["T2"] = cumulative["T2"], cumulative["T1"]
-        if "T2" in names and np.isclose(params["T1"], params["T2"], rtol=AT_BOUND_SHARE):
+        if "T2" in names and np.isclose(params["T1"], params["T2"], rtol=BOUND_SHARE):
             # the poles met: the search sits on the fold T1 = T2 of the symmetric pair, at the edge
             # of real time constants; their sum and product are determined there, neither alone
             # (a hull whose rudder lead exceeds its main time constant lands there)
             std_errors["T1"] = std_errors["T2"] = float("inf")
             flags.append("repeated_time_constants")
-        info = {
-            "start": first.method,
-            "start_parameters": first.parameters,
-            "noise_heading": s_psi,
-            "noise_yaw_rate": s_r,
-            "iterations": iterations,
-            "simulations": simulations,
-            "shooting_intervals": len(intervals),
-            "shooting_s": shooting_s,
-            "cost": float(result.fun @ result.fun),  # squared weighted residuals (-2 log-likelihood + const)
-            "gauss_newton_std": {n: float(s) for n, s in zip(names, gauss_newton)},
-            "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
-            "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
-        }
+        info = dict(info, gauss_newton_std={n: float(s) for n, s in zip(names, gauss_newton)})
         estimate = finish_estimate(structure, dataset, self.name, params, std_errors, flags, info)
         return replace(estimate, influence=Influence(dataset.time, cumulative), covariance=covariance)

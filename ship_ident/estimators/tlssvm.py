@@ -1,5 +1,8 @@
 """Truncated LS-SVM (seed 000): solve through the SVD and drop small singular values.
 
+Seed 000 is Xu and Guedes Soares, "Data-Driven Parameter Estimation of Nonlinear Ship Manoeuvring
+Model in Shallow Water Using Truncated Least Squares Support Vector Machines" (2023).
+
 With unit-RMS columns X_s = U S V', the bias-free linear LS-SVM with
 gamma -> infinity is w_s = V S^-1 U' y; multicollinearity shows as tiny
 singular values whose terms amplify noise. The truncated solution keeps the

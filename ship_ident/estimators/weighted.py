@@ -1,6 +1,7 @@
 """Reconstructed weighted LS-SVM with weights tuned by an adaptive PSO with mutation.
 
-Weights (Suykens' robust LS-SVM) from the residual e of the unweighted
+Weights (Suykens, De Brabanter, Lukas and Vandewalle, "Weighted least squares support vector
+machines: robustness and sparse approximation", 2002) from the residual e of the unweighted
 reconstructed fit, standardised by s = 1.4826 MAD(e):
 
     v_i = 1                          if |e_i/s| <= c1

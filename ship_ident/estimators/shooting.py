@@ -1,0 +1,169 @@
+"""Multiple shooting: the model run free over blocks of the data, each block from its own initial state.
+
+A free run over a long record drifts with every small error of the model (and a course-unstable or
+slow hull's far more), and the cost of one long run is a narrow, curved valley in the parameters.
+Multiple shooting (Bock, 1983) cuts the record into blocks, starts each block's run from an unknown
+state of its own (heading, yaw rate and, second order, yaw acceleration) and fits those states with
+the parameters: the unknowns are
+
+    x = [free parameters, block 0's state, block 1's state, ...]
+
+and a block's state touches only that block's samples, so the Jacobian's state columns are found
+for every block at once, one run per state component (``difference_points``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy import sparse
+
+from ..dataset import Dataset
+from ..structure import Structure
+
+STEP_SHARE = 1e-6  # forward-difference step: this share of each unknown's magnitude ...
+STEP_FLOOR = 1e-2  # ... or of this (SI units) for an unknown near zero
+
+
+class ShootingProblem:
+    """The unknowns, free runs and finite-difference Jacobian of a multiple-shooting fit.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model whose parameters ``names`` are fitted.
+    dataset : Dataset
+        The data; its segments are replaced by ``blocks`` for the runs.
+    blocks : sequence of (int, int)
+        Half-open sample index ranges, each run free from its own state.
+    names : sequence of str
+        The fitted parameters, in the order of the unknowns.
+    fixed : dict
+        The values of every other parameter the model needs (SI units).
+    """
+
+    def __init__(self, structure: Structure, dataset: Dataset, blocks, names, fixed: dict):
+        self.structure = structure
+        self.dataset = dataset
+        self.blocks = tuple(blocks)
+        self.names = list(names)
+        self.fixed = dict(fixed)
+        self.shots = replace(dataset, segments=self.blocks)
+        self.n_params = len(self.names)
+        self.n_state = structure.order + 1  # heading, yaw rate (and yaw acceleration)
+        self.owner = np.full(dataset.n_samples, -1, dtype=np.int64)  # each sample's block, -1 outside
+        for i, (a, b) in enumerate(self.blocks):
+            self.owner[a:b] = i
+
+    @property
+    def size(self) -> int:
+        """Number of unknowns: the parameters and every block's state."""
+        return self.n_params + self.n_state * len(self.blocks)
+
+    def initial_states(self, yaw_rate_bias: float) -> np.ndarray:
+        """Each block's starting state from the data: its first heading (rad) and yaw rate (rad/s)
+        measured, less the sensor's ``yaw_rate_bias`` (rad/s), and no yaw acceleration; one row per
+        block, ``n_state`` columns."""
+        d = self.dataset
+        return np.array([[d.heading[a], d.yaw_rate[a] - yaw_rate_bias, 0.0][: self.n_state] for a, _ in self.blocks])
+
+    def unpack(self, x: np.ndarray) -> tuple[dict, list]:
+        """The parameter set (``fixed`` with the fitted ones of ``x``) and each block's initial state
+        (psi, r, r') of the unknowns ``x``."""
+        params = dict(self.fixed)
+        params.update(zip(self.names, x[: self.n_params]))
+        states = np.asarray(x[self.n_params :]).reshape(-1, self.n_state)
+        return params, [(s[0], s[1], s[2] if self.n_state == 3 else 0.0) for s in states]
+
+    def simulate(self, points, substeps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Heading (rad) and measured yaw rate (rad/s) of the blocks' free runs for several unknown
+        vectors (one row each), in one compiled call; ``substeps`` per sample (default: the fastest
+        time constant's)."""
+        runs = [self.unpack(x) for x in points]
+        return self.structure.simulate_runs([q for q, _ in runs], self.shots, [i for _, i in runs], substeps)
+
+    @staticmethod
+    def steps(x: np.ndarray) -> np.ndarray:
+        """Forward-difference steps of the unknowns ``x``: STEP_SHARE of their magnitude, at least
+        of STEP_FLOOR."""
+        return STEP_SHARE * np.maximum(np.abs(x), STEP_FLOOR)
+
+    def difference_points(self, x: np.ndarray, upper: np.ndarray, chosen) -> tuple[list, np.ndarray]:
+        """The unknowns to run for the Jacobian at ``x``, and the steps.
+
+        Parameters
+        ----------
+        x : ndarray
+            The unknowns.
+        upper : ndarray
+            Upper bounds of the parameters: a step that would cross one is taken backwards (a hull
+            beyond its physical range may not even run).
+        chosen : sequence of int
+            The parameters whose columns are wanted.
+
+        Returns
+        -------
+        points : list of ndarray
+            One point per chosen parameter, then one per state component, that component moved
+            in every block at once (the blocks' runs touch disjoint samples).
+        steps : ndarray
+            The nominal step of every unknown.
+        """
+        steps = self.steps(x)
+        points = []
+        for j in chosen:
+            moved = x.copy()
+            moved[j] += steps[j] if x[j] + steps[j] <= upper[j] else -steps[j]
+            points.append(moved)
+        p, n = self.n_params, self.n_state
+        for c in range(n):
+            moved = x.copy()
+            moved[p + c :: n] += steps[p + c :: n]
+            points.append(moved)
+        return points, steps
+
+    def columns(self, row_blocks: np.ndarray) -> np.ndarray:
+        """The Jacobian's possibly nonzero columns of each residual row, one row per residual: every
+        parameter, then the state of the row's block ``row_blocks`` (rows outside every block, -1,
+        have no state derivative: their zero values are kept in block 0's columns)."""
+        p, n = self.n_params, self.n_state
+        out = np.empty((len(row_blocks), p + n), dtype=np.int64)
+        out[:, :p] = np.arange(p)
+        out[:, p:] = p + n * np.maximum(row_blocks, 0)[:, None] + np.arange(n)
+        return out
+
+    def jacobian(self, x, points, steps, differences, chosen, columns, sparse_matrix: bool = False):
+        """The forward-difference Jacobian of the residuals at ``x``.
+
+        Parameters
+        ----------
+        x, points, steps : ndarray, list, ndarray
+            The unknowns, and ``difference_points``' points and steps.
+        differences : ndarray
+            Residuals at each point less those at ``x``, one row per point.
+        chosen : sequence of int
+            The parameters ``points`` moved; the others' columns are zero.
+        columns : ndarray
+            ``columns`` of the residual rows.
+        sparse_matrix : bool
+            Return a CSR matrix (many blocks: cheaper products) instead of a dense array.
+
+        Returns
+        -------
+        ndarray or scipy.sparse.csr_matrix
+            d residual / d unknown, residual rows by unknowns. A parameter's column is divided by
+            the step as represented (x + h - x, not h: no rounding error of order eps |x| / h).
+        """
+        p = self.n_params
+        values = np.zeros(columns.shape)
+        m, varied = len(chosen), list(chosen)
+        values[:, varied] = (differences[:m] / (np.array(points)[:, varied].diagonal() - x[varied])[:, None]).T
+        values[:, p:] = differences[m:].T / steps[columns[:, p:]]
+        shape = (len(columns), len(x))
+        if sparse_matrix:
+            row_starts = np.arange(0, values.size + 1, columns.shape[1])
+            return sparse.csr_matrix((values.ravel(), columns.ravel(), row_starts), shape=shape)
+        dense = np.zeros(shape)
+        np.put_along_axis(dense, columns, values, axis=1)
+        return dense

@@ -60,7 +60,7 @@ from .estimators.base import Z_95
 from .integrate import forcing as yaw_forcing
 from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
 from .signals import Signals, compute_signals
-from .structure import Structure
+from .structure import Structure, nomoto_parameters
 
 DEFAULT_METHOD = "rlssvm+oe"  # cheap start + output-error refinement: the fits dominate the run time
 TRAINING_FRACTION = 0.65  # first part of the record for fitting, the rest is held out
@@ -943,6 +943,57 @@ def equivalence_sentence(candidate: Candidate) -> str:
     )
 
 
+def shared_fits(refits: dict, training: Dataset, method: str, fitted_windows: Dataset) -> dict:
+    """The candidates' fits, each effect's refitted from the fit of an effect that includes its term
+    where that fit lies inside its structure: a course-stable course_instability fit (a1 > 0, K and
+    the time constants exist) is a cubic_yaw model, so cubic_yaw's search also starts there and
+    keeps whichever runs closer to the training data (two searches of one model may stop in
+    different minima; the ranking then compares the model, not the searches)."""
+    out = dict(refits)
+    for name, fit in refits.items():
+        if not isinstance(fit, Estimate) or fit.structure.form != "acceleration":
+            continue
+        if not nomoto_parameters(fit.parameters):
+            continue
+        for inner in EFFECTS[name].replaces:
+            own = refits.get(inner)
+            if not isinstance(own, Estimate):
+                continue
+            start = own.structure.in_form(fit.parameters)
+            if any(k not in start for k in own.structure.free_names):
+                continue
+            again = _estimator(method).fit(own.structure, training, starts=(start,))
+
+            def error(estimate: Estimate) -> float:
+                return free_run(estimate.structure, estimate.parameters, fitted_windows).fit["rmse_yaw_rate"]
+
+            if error(again) < error(own):
+                out[inner] = again
+    return out
+
+
+def ranking(candidates: list[Candidate]):
+    """Sort key of the candidates: significant first, then by improvement less ``PARSIMONY`` per
+    parameter. An effect whose fit lies where another's structure holds it too ranks after that
+    one: course_instability with a positive linear damping a1 is cubic_yaw's model (the same five
+    parameters of nomoto2, divided by T1 + T2 instead of by the linear damping), so the sign of a1,
+    what separates the two, ranks them, not the held-out scatter of two searches of one model."""
+    by_name = {c.effect: c for c in candidates}
+
+    def key(c: Candidate):
+        inner = next((by_name.get(r) for r in EFFECTS[c.effect].replaces if r in by_name), None)
+        demoted = (
+            inner is not None
+            and c.estimate is not None
+            and c.estimate.structure.form == "acceleration"
+            and bool(nomoto_parameters(c.estimate.parameters))
+            and inner.significant == c.significant
+        )
+        return (not c.significant, demoted, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters)))
+
+    return key
+
+
 def mark_near_equivalents(candidates: list[Candidate], held_out: Dataset) -> None:
     """Name in the first candidate the others the held-out data cannot tell from it: their improvement
     within ``EQUIVALENT_MARGIN`` of the first's and at least ``MIN_IMPROVEMENT``, and the first's
@@ -1074,6 +1125,7 @@ def diagnose(
     context = residual_context(structure, estimate.parameters, dataset)
     evidences = {name: EFFECTS[name].evidence(context) for name in names}
     refits = {n: no_worse(r, training, method, estimate.parameters, fitted_windows) for n, r in refits.items()}
+    refits = shared_fits(refits, training, method, fitted_windows)
     candidates = [
         judge(
             n,
@@ -1094,7 +1146,7 @@ def diagnose(
                     "would be significant, but the training data excite the yaw too little "
                     "(low_excitation) to tell an effect from the model's own scatter"
                 )
-    candidates.sort(key=lambda c: (not c.significant, -(c.improvement - PARSIMONY * len(EFFECTS[c.effect].parameters))))
+    candidates.sort(key=ranking(candidates))
     mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
     tc = yaw_time_constant(estimate.parameters)

@@ -408,10 +408,22 @@ def fastest_time_constant(params: dict) -> float:
 
 
 def nomoto_parameters(params: dict) -> dict:
-    """K and the time constants (1/s, s) of an acceleration-form parameter set, where they exist:
-    a positive linear damping a1 (first order: K = b / a1, T = 1 / a1), and real time constants
-    (second order: T1, T2 the roots of x^2 - x / a1 + m2 / a1, T3 = b1 / b0), with T (T1) below
-    ``NOMOTO_TIME_CONSTANT_LIMIT``; {} otherwise (a course-unstable hull has no K)."""
+    """K and the time constants of an acceleration-form parameter set, where they exist.
+
+    They exist for a positive linear damping a1 (first order: K = b / a1, T = 1 / a1) with real
+    time constants (second order: T1, T2 the roots of x^2 - x / a1 + m2 / a1, T3 = b1 / b0) and
+    T (T1) below ``NOMOTO_TIME_CONSTANT_LIMIT``; a course-unstable hull has no K.
+
+    Parameters
+    ----------
+    params : dict
+        Parameters of the acceleration form (b, a1 or b0, b1, m2, a1; SI units).
+
+    Returns
+    -------
+    dict
+        K (1/s) and T, or T1, T2, T3 (s); empty where they do not exist.
+    """
     a1 = params["a1"]
     if not a1 * NOMOTO_TIME_CONSTANT_LIMIT > 1.0:
         return {}

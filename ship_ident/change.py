@@ -50,7 +50,7 @@ from dataclasses import replace
 import numpy as np
 
 from .dataset import Dataset, cut_segments
-from .effects import yaw_time_constant
+from .effects import slow_time_constant
 from .estimators.base import REFERENCE_RELATIVE_ERRORS, scaled_inverse
 from .estimators.shooting import ShootingProblem
 from .metrics import effective_sample_fraction
@@ -349,7 +349,7 @@ def locate_change(structure: Structure, params: dict, dataset: Dataset, split: i
     def pieces(a: int, b: int) -> tuple:  # blocks of n samples from a to b, the last one shorter
         return cut_segments(((a, b),), n, min_samples=2, align="start")
 
-    span = GAIN_FIT_SPAN * yaw_time_constant(params) / dataset.sample_time
+    span = GAIN_FIT_SPAN * slow_time_constant(params) / dataset.sample_time
 
     def fitted_cost(blocks: tuple, names: tuple) -> float:
         # K alone is a point of the model with K and T1 (T1 held at the reference's): where the

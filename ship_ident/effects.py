@@ -142,7 +142,7 @@ T_UPPER_BOUND = 1e3  # s, the base models' upper bound on T and T1 (structure.BA
 
 
 def yaw_time_constant(params: dict) -> float:
-    """The hull's main yaw time constant (s), the one every time scale of the fits is drawn from.
+    """The hull's yaw time constant (s), the mean delay the diagnosis's time scales are drawn from.
 
     T, T1 + T2, or the acceleration form's 1 / |a1| (T1 + T2 when it is stable; the time a
     course-unstable turn takes to grow by e when not), at most ``T_UPPER_BOUND``. T1 + T2 rather
@@ -169,6 +169,34 @@ def yaw_time_constant(params: dict) -> float:
         slow = 1.0 / max(abs(params["a1"]), 1e-12)
         return float(min(slow, T_UPPER_BOUND))
     return 1.0
+
+
+def slow_time_constant(params: dict) -> float:
+    """The hull's slow pole's time constant (s): T, T1, or the acceleration form's 1 / |a1|.
+
+    The time a change of rudder takes to settle into a new steady turn, which sets how much new data
+    a refit of the gain alone needs (``change``, the gain followed ``online``) and how long a shooting
+    interval of the output-error search must be to learn K (``OutputError.shooting_length``); the
+    mean delay ``yaw_time_constant`` (T1 + T2) is the longer of the two, and a refit on that much
+    new data comes later after a change.
+
+    Parameters
+    ----------
+    params : dict
+        A parameter set of any model form (s, 1/s).
+
+    Returns
+    -------
+    float
+        The time constant (s), at most ``T_UPPER_BOUND``; 0 for a set without any.
+    """
+    if "T" in params:
+        return float(params["T"])
+    if "T1" in params:
+        return float(params["T1"])
+    if "a1" in params:
+        return float(min(1.0 / max(abs(params["a1"]), 1e-12), T_UPPER_BOUND))
+    return 0.0
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:

@@ -37,7 +37,7 @@ from .change import (
     with_held_errors,
 )
 from .dataset import DataError, Dataset, cut_segments, resample_series
-from .effects import yaw_time_constant
+from .effects import slow_time_constant
 from .estimators import make_estimator
 from .estimators.base import (
     MAX_RELATIVE_ERRORS,
@@ -595,7 +595,7 @@ class OnlineIdentifier:
             held, held_errors = self._change.base, self._change.base_errors
         else:
             held, held_errors = last_good.parameters, last_good.std_errors
-        time_constant = yaw_time_constant(held)
+        time_constant = slow_time_constant(held)
         if dataset.duration < GAIN_FIT_SPAN * time_constant:
             return
         block = max(config.change_test_length, GAIN_BLOCK_SPAN * time_constant)

@@ -58,7 +58,7 @@ import numpy as np
 from scipy import sparse
 
 from ..dataset import Dataset, cut_segments
-from ..effects import BOUND_SHARE, yaw_time_constant
+from ..effects import BOUND_SHARE, slow_time_constant
 from ..noise import robust_std
 from ..structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
@@ -71,7 +71,7 @@ VALLEY_SHARES = (0.03, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the starts along the T
 VALLEY_HELD_ITERATIONS = 8  # search iterations at each of them with T2 held
 RESCUE_ITERATIONS_FACTOR = 2  # a search not converged in max_iterations goes on this many times longer
 RESCUE_MAX_COST = 4.0  # ... when its mean squared residual is within this many noise variances
-SHOOTING_SPAN = 3.0  # yaw time constants per shooting interval at least (``shooting_length``)
+SHOOTING_SPAN = 3.0  # slow time constants per shooting interval at least (``shooting_length``)
 RESHOOT_RATIO = 1.5  # a fit whose hull wants intervals this much longer than it used is searched again on them
 SPARSE_INTERVALS = 12  # beyond this many intervals the Jacobian is stored sparse (cheaper J'J)
 TIME_CONSTANT_STARTS = (1.0, 3.0, 10.0, 30.0, 100.0)  # s, main time constants also started from
@@ -365,8 +365,8 @@ class OutputError(Estimator):
 
     def shooting_length(self, dataset: Dataset, params: dict) -> float:
         """Seconds per shooting interval for a hull near ``params``: ``shooting_s``, or
-        SHOOTING_SPAN yaw time constants (``yaw_time_constant``) when longer (``explore`` fits; the diagnosis's figures
-        were measured on fixed intervals), but no longer than the rudder-noise walk
+        SHOOTING_SPAN slow time constants (``slow_time_constant``) when longer (``explore`` fits; the
+        diagnosis's figures were measured on fixed intervals), but no longer than the rudder-noise walk
         time s_psi^2 / ((K s_delta)^2 h) (``walk_limited``), where the heading drift the free run
         accumulates from the rudder's noise reaches the heading noise (30 s on seed 001's hull).
         Each interval's own initial state costs the information of its first time constants: a
@@ -375,7 +375,7 @@ class OutputError(Estimator):
         length = self.shooting_s
         if "K" not in params:  # the acceleration form: a course-unstable hull's free run grows as
             return length  # exp(|a1| t), and intervals of several of its times would diverge
-        main = yaw_time_constant(params)
+        main = slow_time_constant(params)
         if self.shooting_span * main > length:
             length = self.shooting_span * main
             if self.walk_limited:

@@ -36,7 +36,7 @@ test-fast: lint
 	$(PY) -m pytest -n 2 --maxschedchunk 1 -q -rs -m "not slow" test
 
 demo: $(STAMP)
-	$(PY) -m ship_ident.demo
+	$(PY) -m ship_ident.ros.demo
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache

@@ -51,7 +51,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "identifier_node = ship_ident.node:main",
+            "identifier_node = ship_ident.ros.node:main",
             "ship-ident = ship_ident.cli:main",
         ],
     },

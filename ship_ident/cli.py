@@ -49,9 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from .dataset import DataError
     from .estimators import MethodError
-    from .structure import StructureError
+    from .model.dataset import DataError
+    from .model.structure import StructureError
 
     parser = build_parser()
     args = parser.parse_args(argv)

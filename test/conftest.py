@@ -14,7 +14,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import pytest  # noqa: E402
 
-from ship_ident.simulator import simulate  # noqa: E402
+from ship_ident.model.simulator import simulate  # noqa: E402
 
 SHIP_IDENT = Path(sys.executable).parent / "ship-ident"
 

@@ -9,9 +9,9 @@ from ship_ident.bench import benchmarks
 from ship_ident.bench.crb import cramer_rao_bound
 from ship_ident.bench.onboard_diagnosis import at_floor
 from ship_ident.cli import main
-from ship_ident.dataset import Dataset
 from ship_ident.estimators import DEFAULT_METHOD
-from ship_ident.simulator import simulate
+from ship_ident.model.dataset import Dataset
+from ship_ident.model.simulator import simulate
 
 pytestmark = pytest.mark.slow  # each test runs a benchmark's quick variant
 

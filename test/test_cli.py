@@ -11,11 +11,11 @@ import pytest
 from test_io import BAD_INPUTS, make_bad_input
 
 from ship_ident.cli import main
-from ship_ident.dataset import join_recordings
 from ship_ident.estimators import make_estimator
-from ship_ident.io import load_dataset
-from ship_ident.simulator import simulate
-from ship_ident.structure import Structure
+from ship_ident.io.files import load_dataset
+from ship_ident.model.dataset import join_recordings
+from ship_ident.model.simulator import simulate
+from ship_ident.model.structure import Structure
 
 BAGS = Path(__file__).parents[1] / "bags"
 

@@ -78,7 +78,7 @@ def test_built_ship_ident_starts_from_the_install_space(workspace):
 
 def test_built_identifier_node_with_the_params_file_starts_and_identifies(workspace, tmp_path):
     """What `ros2 run ship_ident identifier_node --ros-args --params-file ...` starts, fed by play."""
-    from ship_ident.demo import Listener, ros_environment, shut_down, start_play
+    from ship_ident.ros.demo import Listener, ros_environment, shut_down, start_play
 
     domain = 101  # outside the 1..100 range the other node tests draw from
     env = dict(

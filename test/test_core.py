@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from ship_ident.dataset import DataError, Dataset, cut_segments, resample_series
-from ship_ident.simulator import simulate
-from ship_ident.structure import Structure, StructureError
+from ship_ident.model.dataset import DataError, Dataset, cut_segments, resample_series
+from ship_ident.model.simulator import simulate
+from ship_ident.model.structure import Structure, StructureError
 
 
 def _dataset(time, rudder):

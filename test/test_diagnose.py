@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from ship_ident import cli
-from ship_ident.dataset import join_recordings
-from ship_ident.diagnose import _fit, diagnose, extrapolation, free_run
-from ship_ident.effects import EFFECTS
-from ship_ident.simulator import VESSELS, simulate
-from ship_ident.structure import Structure, nomoto_parameters
+from ship_ident.diagnosis.diagnose import _fit, diagnose, extrapolation, free_run
+from ship_ident.model.dataset import join_recordings
+from ship_ident.model.effects import EFFECTS
+from ship_ident.model.simulator import VESSELS, simulate
+from ship_ident.model.structure import Structure, nomoto_parameters
 
 ROOT = Path(__file__).resolve().parents[1]
 KVLCC2 = ROOT.parent / "shared" / "data" / "kvlcc2_marin"
@@ -168,7 +168,7 @@ def test_docs_added_effect_example_runs():
 def test_kvlcc2_walk_through(tmp_path, capsys):
     """docs/diagnose.md's walk-through on measured data: nomoto1 fitted on the 10/10 zigzag and run
     free on both 20/20 zigzags misses cubic_yaw; adding it cuts the 20/20 error by two thirds."""
-    from ship_ident.io import load_dataset
+    from ship_ident.io.files import load_dataset
 
     def path(name):
         return str(KVLCC2 / f"MARIN_FREE_KVLCC2_{name}_m.csv")
@@ -244,7 +244,7 @@ def test_joined_recordings_stay_apart():
 def test_speed_exponents_follow_the_physics_on_a_narrow_speed_range():
     """K ~ U and T ~ 1/U held (n_K = n_T = 1) when the training speed hardly varies; fitted, within
     their bounds [0, 2], when it spans 60-120 % of the nominal speed."""
-    from ship_ident.diagnose import physical_speed_law
+    from ship_ident.diagnosis.diagnose import physical_speed_law
 
     structure = Structure("nomoto2", ("speed_dependence",))
     varying = simulate("random", "seed001", effects=("speed_dependence",), duration=DURATION, seed=4).dataset

@@ -9,7 +9,7 @@ import ship_ident
 
 PACKAGE = Path(ship_ident.__file__).parent
 # The numeric core's modules whose API the rest of the package builds on.
-API_MODULES = ("structure", "effects", "dataset", "diagnose", "estimators")
+API_MODULES = ("model.structure", "model.effects", "model.dataset", "diagnosis.diagnose", "estimators")
 
 
 def module_name(path: Path) -> str:
@@ -67,7 +67,12 @@ def problems(node) -> list[str]:
 
 def test_the_check_finds_the_api_and_what_a_docstring_lacks():
     names = {f"{module}.{node.name}" for module, node in public_api()}
-    assert {"structure.Structure", "dataset.cut_segments", "estimators.make_estimator", "diagnose.diagnose"} <= names
+    assert {
+        "model.structure.Structure",
+        "model.dataset.cut_segments",
+        "estimators.make_estimator",
+        "diagnosis.diagnose.diagnose",
+    } <= names
     bare = ast.parse('def f(x) -> int:\n    """Sum\n    of x."""\n').body[0]
     assert problems(bare) == ["no one-line summary", "no Parameters section", "no Returns section"]
 

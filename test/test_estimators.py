@@ -14,8 +14,8 @@ from ship_ident.estimators.lssvm import (
     lssvm_primal_with_bias,
     ridge_primal,
 )
-from ship_ident.simulator import simulate
-from ship_ident.structure import Structure
+from ship_ident.model.simulator import simulate
+from ship_ident.model.structure import Structure
 
 REGRESSIONS = ("ols", "lssvm", "rlssvm", "rwlssvm", "tlssvm")
 
@@ -84,7 +84,7 @@ def test_output_error_meets_noisy_targets_and_std_errors_are_finite(noisy):
 def test_prediction_error_handles_a_noisy_rudder_sensor():
     """0.5 deg rudder noise: the innovation-whitened fit keeps K and T1 near the truth, where
     the output-error fit drifts by several percent (measured over seeds: 4.5 % against 0.5 % rms)."""
-    from ship_ident.simulator import Noise
+    from ship_ident.model.simulator import Noise
 
     sim = simulate("zigzag20", noise=Noise(rudder=np.radians(0.5)), duration=600.0, seed=200)
     pem = make_estimator("rwlssvm+pem").fit(sim.structure, sim.dataset)
@@ -200,7 +200,7 @@ def test_a_slow_ship_is_shot_over_intervals_of_its_own_time_scale():
     each restarting from its own state, they were 2.6 % and 6.4 % off here, 1.3 % and 2.8 % RMS
     over noise seeds; now 0.4 % and 0.8 %, at their standard errors)."""
     from ship_ident.bench.vessels import draw_case
-    from ship_ident.simulator import Noise
+    from ship_ident.model.simulator import Noise
 
     case = draw_case(1820632815, quick=True)
     vessel, config = case["vessel"], case["config"]

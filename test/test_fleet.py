@@ -10,9 +10,9 @@ from conftest import once_per_run
 from ship_ident.cli import build_parser, main
 from ship_ident.commands.common import topics_from_args
 from ship_ident.commands.replay import config_from_args
-from ship_ident.fleet import FleetError, add_fleet_arguments, run_fleet, vessel_of
-from ship_ident.io import write_simulation
-from ship_ident.simulator import simulate
+from ship_ident.io.files import write_simulation
+from ship_ident.io.fleet import FleetError, add_fleet_arguments, run_fleet, vessel_of
+from ship_ident.model.simulator import simulate
 
 pytestmark = pytest.mark.slow  # a fleet of bags, a local dask cluster
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from ship_ident import diagnose
 from ship_ident.cli import build_parser
 from ship_ident.commands import simulate, threedof
+from ship_ident.diagnosis import diagnose
 from ship_ident.estimators import DEFAULT_METHOD
-from ship_ident.online_config import OnlineConfig
+from ship_ident.online.config import OnlineConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 PARSER = build_parser()

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from ship_ident.bench.hidden_effects import run_case
-from ship_ident.diagnose import diagnose
-from ship_ident.simulator import Vessel, simulate
+from ship_ident.diagnosis.diagnose import diagnose
+from ship_ident.model.simulator import Vessel, simulate
 
 pytestmark = pytest.mark.slow  # each case simulates and diagnoses a whole recording
 

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from ship_ident.bench.crb import identifiability
-from ship_ident.effects import EFFECTS
-from ship_ident.simulator import Noise, Vessel, simulate
-from ship_ident.structure import Structure
+from ship_ident.model.effects import EFFECTS
+from ship_ident.model.simulator import Noise, Vessel, simulate
+from ship_ident.model.structure import Structure
 
 MAX_CONDITION = 1e8
 MAX_RELATIVE_BOUND = 1.0  # a Cramer-Rao bound beyond the parameter's own value: not determined
@@ -104,7 +104,7 @@ def test_every_effect_on_every_base_model_has_no_free_direction(model, effect, h
 def test_a_free_linear_damping_beside_nomoto_k_and_t_is_caught():
     """The check itself: the Nomoto form with its linear damping freed, T r' + n1 r + n3 r^3 = K delta,
     is unchanged when K, T, n1 and n3 are multiplied by one number; its information is singular."""
-    from ship_ident.effects import CubicYaw, ForcingTerm, Parameter, register_effect
+    from ship_ident.model.effects import CubicYaw, ForcingTerm, Parameter, register_effect
 
     class FreeLinearDamping(CubicYaw):
         name = "free_linear_damping"

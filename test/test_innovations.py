@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 
 from ship_ident.bench.crb import cramer_rao_bound
-from ship_ident.dataset import Dataset
 from ship_ident.estimators import make_estimator
 from ship_ident.estimators.base import fit_substeps
-from ship_ident.innovations import innovation_filter, noise_model
-from ship_ident.simulator import Noise, simulate
-from ship_ident.structure import Structure
+from ship_ident.estimators.innovations import innovation_filter, noise_model
+from ship_ident.model.dataset import Dataset
+from ship_ident.model.simulator import Noise, simulate
+from ship_ident.model.structure import Structure
 
 NOISE = Noise()
 

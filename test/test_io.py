@@ -11,8 +11,7 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
-from ship_ident.dataset import DataError, join_recordings
-from ship_ident.io import (
+from ship_ident.io.files import (
     BagWriter,
     Topics,
     load_dataset,
@@ -22,7 +21,8 @@ from ship_ident.io import (
     wrap_angle,
     write_simulation,
 )
-from ship_ident.simulator import simulate
+from ship_ident.model.dataset import DataError, join_recordings
+from ship_ident.model.simulator import simulate
 
 FORMATS = {"rosbag2": "bag", "mcap": "run.mcap", "csv": "run.csv"}
 STAMP_OFFSET = 1000.0  # s, header stamps of the Imu test (a zero stamp means "unstamped")

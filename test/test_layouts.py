@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 from rosbags.highlevel import AnyReader
 
-from ship_ident.bag_replay import replay_bag
-from ship_ident.io import Topics, typestore, write_simulation
-from ship_ident.online_config import OnlineConfig
-from ship_ident.simulator import simulate
+from ship_ident.io.bag_replay import replay_bag
+from ship_ident.io.files import Topics, typestore, write_simulation
+from ship_ident.model.simulator import simulate
+from ship_ident.online.config import OnlineConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 FOXGLOVE = ROOT / "config" / "foxglove_layout.json"
@@ -73,7 +73,7 @@ def replayed(tmp_path_factory):
 def node_topics(tmp_path_factory):
     """{topic: message type} of what a real node publishes and subscribes to."""
     rclpy = pytest.importorskip("rclpy")
-    node_module = pytest.importorskip("ship_ident.node")
+    node_module = pytest.importorskip("ship_ident.ros.node")
     os.environ.setdefault("ROS_LOG_DIR", str(tmp_path_factory.mktemp("ros_log")))
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=150 + (os.getpid() + 2) % 50)

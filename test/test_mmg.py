@@ -11,7 +11,7 @@ pytest.importorskip("shipmmg")
 from ship_ident.bench import mmg  # noqa: E402
 from ship_ident.bench.hidden_effects import render, run  # noqa: E402
 from ship_ident.cli import main  # noqa: E402
-from ship_ident.effects import EFFECTS  # noqa: E402
+from ship_ident.model.effects import EFFECTS  # noqa: E402
 
 # KVLCC2's free-running model tests at MARIN for SIMMAN 2008 (Stern et al., "Experience from
 # SIMMAN 2008", J. Ship Research 55(2), 2011), read off the runs to both sides (port first,

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from ship_ident.commands.play import Player
-from ship_ident.demo import Listener, ros_environment, shut_down, start_node, start_play, stop
-from ship_ident.io import read_samples, write_simulation
-from ship_ident.simulator import simulate
+from ship_ident.io.files import read_samples, write_simulation
+from ship_ident.model.simulator import simulate
+from ship_ident.ros.demo import Listener, ros_environment, shut_down, start_node, start_play, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.node]  # every test here starts the node over real DDS
 
@@ -282,7 +282,7 @@ def test_node_survives_bad_input_and_reports_it(env, domain_id, bag):
 
 def test_node_rejects_bad_start_parameters_in_one_line(env):
     result = subprocess.run(
-        [sys.executable, "-m", "ship_ident.node", "--ros-args", "-p", "effects:=[barnacles]"],
+        [sys.executable, "-m", "ship_ident.ros.node", "--ros-args", "-p", "effects:=[barnacles]"],
         env=env,
         capture_output=True,
         text=True,
@@ -316,8 +316,8 @@ def test_node_stops_on_sigterm(env):
 def test_the_diagnosis_child_leaves_ctrl_c_to_the_node():
     """The node's diagnosis child, serving (it answered a job), outlives a SIGINT (a terminal's
     Ctrl-C reaches the whole process group; the node ends the child itself)."""
-    from ship_ident.online_diagnosis import DiagnosisWorker
-    from ship_ident.simulator import simulate as simulate_trip
+    from ship_ident.diagnosis.onboard import DiagnosisWorker
+    from ship_ident.model.simulator import simulate as simulate_trip
 
     worker = DiagnosisWorker()
     try:

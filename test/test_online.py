@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from ship_ident.bench import vessels
-from ship_ident.change import ChangeDetector, fit_gain, variance_change_point, with_held_errors
-from ship_ident.dataset import cut_segments
-from ship_ident.estimate_log import EstimateLog
 from ship_ident.estimators.base import Estimate
-from ship_ident.io import Sample
-from ship_ident.metrics import noise_limited_correlation
-from ship_ident.online import FOLLOWED_INSTEAD, WATCHES_PER_REFIT, OnlineIdentifier, run_schedule
-from ship_ident.online_config import ConfigError, OnlineConfig
-from ship_ident.simulator import Noise, random_vessel, simulate
+from ship_ident.io.files import Sample
+from ship_ident.model.dataset import cut_segments
+from ship_ident.model.metrics import noise_limited_correlation
+from ship_ident.model.simulator import Noise, random_vessel, simulate
+from ship_ident.online.change import ChangeDetector, fit_gain, variance_change_point, with_held_errors
+from ship_ident.online.config import ConfigError, OnlineConfig
+from ship_ident.online.estimate_log import EstimateLog
+from ship_ident.online.identifier import FOLLOWED_INSTEAD, WATCHES_PER_REFIT, OnlineIdentifier, run_schedule
 
 
 def stream(dataset, start=0.0, rudder=None):
@@ -526,7 +526,7 @@ def test_a_jump_beyond_its_uncertainty_or_a_worse_free_run_is_held(sim):
     uncertainty makes the true estimate a jump of many standard errors that its free run justifies
     (accepted); a last good estimate equal to the truth is never replaced by a worse free run."""
     from ship_ident.estimators import make_estimator
-    from ship_ident.online import _jump
+    from ship_ident.online.identifier import _jump
 
     config = OnlineConfig()
     window = sim.dataset.slice(0, 1800)
@@ -557,7 +557,7 @@ def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
     errors as the windows move (a missed effect) get about 3.5 times their errors; estimates that
     scatter within their errors keep them; 14 errors apart alternately, far wider errors."""
     from ship_ident.estimators.base import Estimate
-    from ship_ident.online import EstimateScatter
+    from ship_ident.online.identifier import EstimateScatter
 
     structure = OnlineConfig(model="nomoto1", effects=()).structure()
     fresh = 5.0 / 180.0
@@ -979,7 +979,7 @@ def test_a_hull_whose_rudder_lead_cancels_its_lag_publishes_T1_as_uncertain():
     """T3 2.8 s against T1 3 s: the zero nearly cancels the slow pole, the data determine K to 0.2 %
     but T1 only to 5-15 %: such estimates are published with their errors as uncertain_estimate
     (WARN), never as OK with T1 more than 10 % off."""
-    from ship_ident.simulator import _EFFECT_TRUTH, Vessel
+    from ship_ident.model.simulator import _EFFECT_TRUTH, Vessel
 
     truth = dict(_EFFECT_TRUTH, K=0.3, T1=3.0, T2=0.5, T3=2.8, T=0.7, alpha=2.0, delta_r=0.01)
     vessel = Vessel("cancel", "rudder lead near the slow lag", truth, seed_effects=("rudder_offset", "cubic_yaw"))

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from ship_ident.bench.peers import dataset_samples
-from ship_ident.online import OnlineIdentifier, run_schedule
-from ship_ident.online_config import OnlineConfig
-from ship_ident.online_diagnosis import DiagnosisWorker, OnlineDiagnosis, PooledEvidence, diagnose_window, slice_sums
-from ship_ident.simulator import Vessel, simulate
+from ship_ident.diagnosis.onboard import DiagnosisWorker, OnlineDiagnosis, PooledEvidence, diagnose_window, slice_sums
+from ship_ident.model.simulator import Vessel, simulate
+from ship_ident.online.config import OnlineConfig
+from ship_ident.online.identifier import OnlineIdentifier, run_schedule
 
 SEED_EFFECTS = ("rudder_offset", "cubic_yaw")  # the seed001 vessel's own, and the node's default model
 

@@ -6,11 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from ship_ident.online import RefitRecord
-from ship_ident.online_config import OnlineConfig
-from ship_ident.outputs import YawRatePrediction, diagnostic_status, gain_band, trusted_parameters
-from ship_ident.samples import Sample
-from ship_ident.simulator import simulate
+from ship_ident.model.simulator import simulate
+from ship_ident.online.config import OnlineConfig
+from ship_ident.online.identifier import RefitRecord
+from ship_ident.online.outputs import YawRatePrediction, diagnostic_status, gain_band, trusted_parameters
+from ship_ident.online.samples import Sample
 
 STRUCTURE = {"model": "nomoto2", "effects": ["rudder_offset", "cubic_yaw"]}
 NAMES = ("K", "T1", "T2", "T3", "delta_r", "alpha")  # of STRUCTURE

@@ -11,9 +11,10 @@ import pytest
 import yaml
 
 from ship_ident.cli import main as cli_main
-from ship_ident.effects import EFFECTS
 from ship_ident.estimators import method_names
-from ship_ident.online_config import (
+from ship_ident.model.effects import EFFECTS
+from ship_ident.model.structure import BASE_MODELS, StructureError, parse_effects
+from ship_ident.online.config import (
     NODE_PARAMETERS,
     TABLE_END,
     TABLE_START,
@@ -26,7 +27,6 @@ from ship_ident.online_config import (
     spec,
     specs,
 )
-from ship_ident.structure import BASE_MODELS, StructureError, parse_effects
 
 ROOT = Path(__file__).resolve().parent.parent
 BAG = ROOT / "bags" / "demo_seed001.mcap"
@@ -43,7 +43,7 @@ def test_every_node_parameter_is_defined_once_with_a_description():
 
 def test_parameter_file_holds_exactly_the_parameters_with_their_defaults():
     text = (ROOT / "config" / "ship_ident.yaml").read_text()
-    assert text == parameter_file(), "config/ship_ident.yaml is stale: python -m ship_ident.online_config"
+    assert text == parameter_file(), "config/ship_ident.yaml is stale: python -m ship_ident.online.config"
     values = yaml.safe_load(text)["/**"]["ros__parameters"]
     assert list(values) == list(DEFINED)
     for name, (default, _) in DEFINED.items():
@@ -60,7 +60,7 @@ def table_rows(markdown: str) -> dict:
 
 def test_docs_parameter_table_matches_the_definition():
     markdown = (ROOT / "docs" / "node.md").read_text()
-    assert table_rows(markdown) == table_rows(parameter_table()), "docs/node.md: python -m ship_ident.online_config"
+    assert table_rows(markdown) == table_rows(parameter_table()), "docs/node.md: python -m ship_ident.online.config"
     rows = table_rows(markdown)
     assert list(rows) == list(DEFINED)
     for name, (default, s) in DEFINED.items():
@@ -71,7 +71,7 @@ def test_docs_parameter_table_matches_the_definition():
 
 
 def test_node_descriptors_carry_the_ranges_and_names():
-    node = pytest.importorskip("ship_ident.node")
+    node = pytest.importorskip("ship_ident.ros.node")
     descriptors = node.parameter_descriptors()
     assert list(descriptors) == list(DEFINED)
     for name, (default, s) in DEFINED.items():
@@ -91,7 +91,7 @@ def test_a_real_node_refuses_a_window_beyond_its_range(tmp_path, monkeypatch):
     """The descriptors on a real rclpy node (its own context and ROS domain, never spun): a 5000 s
     window is refused by its range, 600 s is taken."""
     rclpy = pytest.importorskip("rclpy")
-    node_module = pytest.importorskip("ship_ident.node")
+    node_module = pytest.importorskip("ship_ident.ros.node")
     from rclpy.parameter import Parameter
 
     monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path))
@@ -118,7 +118,7 @@ def test_a_namespaced_node_takes_its_values_from_the_parameter_file(tmp_path, mo
     """The shipped file is keyed /**: with -r __ns:=/boat1 (a namespaced or launched node) a value
     in it is taken, not silently left for the default."""
     rclpy = pytest.importorskip("rclpy")
-    node_module = pytest.importorskip("ship_ident.node")
+    node_module = pytest.importorskip("ship_ident.ros.node")
     text = parameter_file()
     assert "    window_length: 180.0\n" in text
     params = tmp_path / "boat1.yaml"

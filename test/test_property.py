@@ -9,11 +9,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ship_ident.io import ROLES, Sample
-from ship_ident.jsonio import dumps_json
-from ship_ident.online import OnlineIdentifier, RefitRecord, run_schedule
-from ship_ident.online_config import OnlineConfig
-from ship_ident.simulator import simulate
+from ship_ident.io.files import ROLES, Sample
+from ship_ident.io.jsonio import dumps_json
+from ship_ident.model.simulator import simulate
+from ship_ident.online.config import OnlineConfig
+from ship_ident.online.identifier import OnlineIdentifier, RefitRecord, run_schedule
 
 SMALL = OnlineConfig(
     sample_time=0.1,

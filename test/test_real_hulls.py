@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ship_ident.diagnose import free_run
+from ship_ident.diagnosis.diagnose import free_run
 from ship_ident.estimators import make_estimator
-from ship_ident.online import OnlineConfig
-from ship_ident.simulator import Vessel, simulate
-from ship_ident.structure import Structure
+from ship_ident.model.simulator import Vessel, simulate
+from ship_ident.model.structure import Structure
+from ship_ident.online.identifier import OnlineConfig
 
 KVLCC2 = Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2_marin"
 
@@ -47,7 +47,7 @@ def test_a_course_unstable_tanker_is_fitted_in_what_its_zigzag_determines():
     """KVLCC2's 10/10 zigzag (MARIN, measured) with course_instability: the rudder's yaw acceleration
     within 10 %, at most one parameter (the linear damping near zero) beyond 10 times its value, and
     a stability verdict with the standard errors it rests on; no K and T where a1 < 0."""
-    from ship_ident.io import load_dataset
+    from ship_ident.io.files import load_dataset
 
     data = load_dataset(str(KVLCC2 / "MARIN_FREE_KVLCC2_zz_10_m.csv"), sample_time=1.0)
     estimate = make_estimator("rwlssvm+pem").fit(Structure("nomoto1", ("course_instability",)), data)
@@ -83,8 +83,8 @@ def test_a_usv_held_by_quadratic_drag_converges_off_its_bounds():
 def test_the_node_publishes_a_usv_held_by_quadratic_drag(tmp_path):
     """Online (``replay``, the node's code) with rudder_offset and quadratic_yaw: an estimate, not a
     refusal for too little excitation, in at least half of the full windows."""
-    from ship_ident.bag_replay import replay_bag
-    from ship_ident.io import DEFAULT_TOPICS, write_simulation
+    from ship_ident.io.bag_replay import replay_bag
+    from ship_ident.io.files import DEFAULT_TOPICS, write_simulation
 
     path = tmp_path / "usv.csv"
     write_simulation(_usv("random", 400.0, 4), path, "csv")

@@ -9,10 +9,10 @@ import pytest
 from test_io import BAD_INPUTS, make_bad_input, written  # noqa: F401  (fixture)
 
 from ship_ident.cli import main
-from ship_ident.io import Sample
-from ship_ident.online import OnlineIdentifier, run_schedule
-from ship_ident.online_config import OnlineConfig
-from ship_ident.simulator import simulate
+from ship_ident.io.files import Sample
+from ship_ident.model.simulator import simulate
+from ship_ident.online.config import OnlineConfig
+from ship_ident.online.identifier import OnlineIdentifier, run_schedule
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -12,10 +12,10 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from ship_ident.commands.replay import replay_bag
-from ship_ident.demo import BAG as DEMO_BAG
-from ship_ident.io import Topics, typestore, write_simulation
-from ship_ident.online_config import OnlineConfig
-from ship_ident.simulator import simulate
+from ship_ident.io.files import Topics, typestore, write_simulation
+from ship_ident.model.simulator import simulate
+from ship_ident.online.config import OnlineConfig
+from ship_ident.ros.demo import BAG as DEMO_BAG
 
 
 def replay(*args):

@@ -6,9 +6,9 @@ import subprocess
 
 import pytest
 
-from ship_ident.diagnose import diagnose
-from ship_ident.report import write_report
-from ship_ident.simulator import simulate
+from ship_ident.diagnosis.diagnose import diagnose
+from ship_ident.diagnosis.report import write_report
+from ship_ident.model.simulator import simulate
 
 pytestmark = pytest.mark.slow  # fits, diagnoses and renders a full report
 

@@ -10,9 +10,9 @@ import pytest
 from test_node import domain_id, env  # noqa: F401  (fixtures)
 
 from ship_ident.commands.play import Player
-from ship_ident.demo import Listener, shut_down, start_node
-from ship_ident.node import TICKS_PER_REFIT
-from ship_ident.simulator import simulate
+from ship_ident.model.simulator import simulate
+from ship_ident.ros.demo import Listener, shut_down, start_node
+from ship_ident.ros.node import TICKS_PER_REFIT
 
 pytestmark = [pytest.mark.slow, pytest.mark.node]  # ten simulated minutes at 100 Hz through the node
 

@@ -33,10 +33,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..dataset import Dataset
 from ..estimators.base import fit_substeps
-from ..innovations import innovation_filter, noise_model, spectral_fisher_information
-from ..structure import Structure
+from ..estimators.innovations import innovation_filter, noise_model, spectral_fisher_information
+from ..model.dataset import Dataset
+from ..model.structure import Structure
 
 # the parameters the linearised noise model depends on (either form)
 NOISE_SHAPING = ("K", "T", "T1", "T2", "T3", "b", "b0", "b1", "m2", "a1")

@@ -18,10 +18,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..dataset import Dataset
 from ..estimators import DEFAULT_METHOD, make_estimator
 from ..estimators.base import Z_95
-from ..simulator import Noise, simulate
+from ..model.dataset import Dataset
+from ..model.simulator import Noise, simulate
 from . import progress, register
 from .common import table
 from .crb import cramer_rao_bound

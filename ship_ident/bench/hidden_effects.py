@@ -35,10 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run, no_worse, parameter_warnings
-from ..effects import EFFECTS
-from ..simulator import Noise, random_vessel, simulate
-from ..structure import Structure
+from ..diagnosis.diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run, no_worse, parameter_warnings
+from ..model.effects import EFFECTS
+from ..model.simulator import Noise, random_vessel, simulate
+from ..model.structure import Structure
 from . import progress, register
 from .common import table
 

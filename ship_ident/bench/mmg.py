@@ -30,8 +30,8 @@ from functools import partial
 
 import numpy as np
 
-from ..dataset import Dataset, join_recordings
-from ..simulator import Noise
+from ..model.dataset import Dataset, join_recordings
+from ..model.simulator import Noise
 
 WATER_DENSITY = 1025.0  # kg/m^3 (shipmmg's default, passed explicitly: every mass below is in kg)
 

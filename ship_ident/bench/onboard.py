@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..online_config import OnlineConfig
-from ..simulator import random_vessel, simulate
+from ..model.simulator import random_vessel, simulate
+from ..online.config import OnlineConfig
 from . import progress, register
 from .common import table
 
@@ -63,7 +63,7 @@ DEFAULT_EFFECTS = ("rudder_offset", "cubic_yaw")  # the node's default model: no
 def drawn_trip(rng: np.random.Generator, duration: float, folder: str, k: int) -> tuple:
     """A USV drawn with ``random_vessel`` (then a trip seed, from ``rng``), its random-step trip of
     ``duration`` s with the node's default effects written to ``folder/trip{k}.mcap``: (vessel, bag)."""
-    from ..io import write_simulation
+    from ..io.files import write_simulation
 
     vessel = random_vessel(rng, "usv")
     trip_seed = int(rng.integers(2**31))
@@ -75,7 +75,7 @@ def drawn_trip(rng: np.random.Generator, duration: float, folder: str, k: int) -
 
 def measure(bag: Path, period: float, window: float, measure_s: float, domain_id: int, log_dir: str) -> dict:
     """One node run with ``diagnosis_period`` = ``period``: CPU share, refit times, diagnoses."""
-    from ..demo import quiet_trip, shut_down
+    from ..ros.demo import quiet_trip, shut_down
 
     node, listener, play = quiet_trip(
         domain_id, log_dir, bag, 1.0, f"diagnosis_period:={period}", f"window_length:={window}"

@@ -5,7 +5,7 @@ manoeuvre and the effect's strength are drawn as ``hidden-effects`` draws them
 (``hidden_effects.draw_case``: quick USVs to slow ships, a strength that matters on that vessel in
 that manoeuvre); the trips without a hidden effect also sail steady legs and steady turns. The
 trip lasts ``TRIP_S`` (15 min) and is written to an MCAP and replayed as ``ship-ident replay BAG
---model nomoto2 --diagnosis-period 60 --auto-add-effects`` replays it (``bag_replay.replay_bag``:
+--model nomoto2 --diagnosis-period 60 --auto-add-effects`` replays it (``io.bag_replay.replay_bag``:
 the node's core, the diagnoses inline), the window ``WINDOW_S`` long for the vessel's kind (a
 slow ship's crew gives it ten minutes).
 
@@ -34,11 +34,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bag_replay import replay_bag
-from ..diagnose import NOISE_MARGIN, diagnose
-from ..effects import EFFECTS
-from ..io import DEFAULT_TOPICS, write_simulation
-from ..online_config import OnlineConfig
+from ..diagnosis.diagnose import NOISE_MARGIN, diagnose
+from ..io.bag_replay import replay_bag
+from ..io.files import DEFAULT_TOPICS, write_simulation
+from ..model.effects import EFFECTS
+from ..online.config import OnlineConfig
 from . import progress, register
 from .common import table
 from .hidden_effects import FAIR_SHARE, MANOEUVRES, SAMPLE_TIME_S, draw_case, true_improvement

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..online_config import OnlineConfig
+from ..online.config import OnlineConfig
 from . import progress, register
 from .common import table
 from .onboard import drawn_trip
@@ -32,7 +32,7 @@ DOMAIN_IDS = range(146, 150)  # apart from the tests' domains (1..100, 150..199)
 def diagnose_trip(bag: Path, duration: float, pace: float, window: float, period: float, domain_id: int, log_dir):
     """Play ``bag`` (``duration`` s) at ``pace`` to a node diagnosing its ``window`` s window every
     ``period`` s; return the diagnoses it published and the missing_effect WARNs it raised."""
-    from ..demo import quiet_trip, shut_down
+    from ..ros.demo import quiet_trip, shut_down
 
     node, listener, play = quiet_trip(
         domain_id, log_dir, bag, pace, f"window_length:={window}", f"diagnosis_period:={period}"

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from ..estimators import DEFAULT_METHOD, make_estimator
-from ..io import write_simulation
-from ..online import OnlineIdentifier, run_schedule
-from ..online_config import OnlineConfig
-from ..samples import Sample, Topics
-from ..simulator import Noise, simulate
+from ..io.files import write_simulation
+from ..model.simulator import Noise, simulate
+from ..online.config import OnlineConfig
+from ..online.identifier import OnlineIdentifier, run_schedule
+from ..online.samples import Sample, Topics
 from . import progress
 from .efficiency import QUANTITIES, _with_derived, record_bound, summarise
 from .peer_models import (
@@ -246,7 +246,7 @@ def speed_and_scaling(compute_seconds: dict, quick: bool = False) -> dict:
 
 def replay_throughput(duration: float) -> dict:
     """Replay a simulated bag of ``duration`` s with the node's default configuration (fleet's per-bag task)."""
-    from ..fleet import BagJob, identify_bag
+    from ..io.fleet import BagJob, identify_bag
 
     progress(f"peers replay: simulating and writing a {duration:.0f} s bag")
     sim = simulate("mixed", "seed001", duration=duration, noise=1.0, seed=43)

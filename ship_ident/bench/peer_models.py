@@ -16,9 +16,9 @@ import numpy as np
 
 from ..estimators import make_estimator
 from ..estimators.lssvm import lssvm_dual_with_bias
-from ..integrate import advance, initial_z
-from ..signals import compute_signals
-from ..structure import Structure
+from ..model.integrate import advance, initial_z
+from ..model.signals import compute_signals
+from ..model.structure import Structure
 
 STRUCTURE = Structure("nomoto2", ["rudder_offset", "cubic_yaw"])
 PARAMETERS = STRUCTURE.parameter_names

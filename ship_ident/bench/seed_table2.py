@@ -15,8 +15,8 @@ import time
 import numpy as np
 
 from ..estimators import make_estimator
-from ..metrics import signal_metrics
-from ..simulator import simulate
+from ..model.metrics import signal_metrics
+from ..model.simulator import simulate
 from . import progress, register
 from .common import relative_error_percent, table
 

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from ..estimators import make_estimator, method_names
-from ..simulator import simulate
+from ..model.simulator import simulate
 from . import progress, register
 from .common import table
 

@@ -63,13 +63,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import DataError, Dataset
 from ..estimators import make_estimator
 from ..estimators.base import TRUSTED_RELATIVE_ERRORS, Z_95
-from ..online import OnlineIdentifier, run_schedule
-from ..online_config import OnlineConfig
-from ..simulator import Noise, random_vessel, simulate
-from ..structure import StructureError
+from ..model.dataset import DataError, Dataset
+from ..model.simulator import Noise, random_vessel, simulate
+from ..model.structure import StructureError
+from ..online.config import OnlineConfig
+from ..online.identifier import OnlineIdentifier, run_schedule
 from . import progress, register
 from .common import table
 from .crb import cramer_rao_bound

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..dataset import Dataset, join_recordings
-from ..effects import EFFECTS
 from ..estimators import DEFAULT_METHOD, method_names
-from ..io import Topics, is_canonical, load_dataset, parse_columns
-from ..structure import BASE_MODELS, Structure
+from ..io.files import Topics, is_canonical, load_dataset, parse_columns
+from ..model.dataset import Dataset, join_recordings
+from ..model.effects import EFFECTS
+from ..model.structure import BASE_MODELS, Structure
 
 DEFAULT_TOPICS = Topics()
 

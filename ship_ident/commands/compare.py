@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CommandError
-from ..jsonio import dumps_json
-from ..metrics import free_run_fit
-from ..structure import Structure, require_samples
+from ..io.jsonio import dumps_json
+from ..model.metrics import free_run_fit
+from ..model.structure import Structure, require_samples
 from .common import add_data_args, add_json_arg, add_recordings_arg, load_recordings, sources
 from .identify import data_field, format_fit
 from .threedof import add_threedof_args, run_compare

@@ -6,9 +6,9 @@ import math
 import sys
 import time
 
-from ..diagnose import DEFAULT_METHOD, covered, diagnose
-from ..jsonio import dumps_json
-from ..structure import parse_effects, require_samples
+from ..diagnosis.diagnose import DEFAULT_METHOD, covered, diagnose
+from ..io.jsonio import dumps_json
+from ..model.structure import parse_effects, require_samples
 from .common import add_data_args, add_json_arg, add_model_args, add_recordings_arg, load_recordings, sources
 from .identify import data_field
 
@@ -62,7 +62,7 @@ def run(args) -> int:
         validation=validation,
     )
     if args.report:
-        from ..report import write_report
+        from ..diagnosis.report import write_report
 
         progress(f"writing the report to {args.report}")
         held_out = f" (held out: {', '.join(args.validate)})" if args.validate else ""

@@ -8,8 +8,8 @@ from pathlib import Path
 from ..errors import CommandError
 from ..estimators import DEFAULT_METHOD, make_estimator
 from ..estimators.base import excitation_shortfall
-from ..jsonio import dumps_json
-from ..structure import require_samples
+from ..io.jsonio import dumps_json
+from ..model.structure import require_samples
 from .common import (
     add_data_args,
     add_json_arg,

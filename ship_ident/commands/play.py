@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 import time
 
-from ..io import DEFAULT_TOPICS, Topics, read_samples
+from ..io.files import DEFAULT_TOPICS, Topics, read_samples
 from .common import add_data_args, topics_from_args
 
 

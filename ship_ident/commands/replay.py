@@ -27,12 +27,12 @@ import sys
 import threading
 from pathlib import Path
 
-from ..bag_replay import replay_bag
 from ..errors import CommandError
-from ..fleet import FleetError, add_fleet_arguments, run_fleet
-from ..io import Topics
-from ..jsonio import dumps_json
-from ..online_config import OnlineConfig, spec
+from ..io.bag_replay import replay_bag
+from ..io.files import Topics
+from ..io.fleet import FleetError, add_fleet_arguments, run_fleet
+from ..io.jsonio import dumps_json
+from ..online.config import OnlineConfig, spec
 from .common import add_data_args, add_model_args, topics_from_args
 
 DEFAULTS = OnlineConfig()
@@ -49,7 +49,7 @@ def add_parser(subparsers) -> None:
         metavar="BAG",
         nargs="+",
         help="rosbag2 directory, .mcap file or CSV file; several (or --jobs, --table, "
-        "--dask): a fleet run into one table, see ship_ident/fleet.py",
+        "--dask): a fleet run into one table, see ship_ident/io/fleet.py",
     )
     add_data_args(parser)
     add_model_args(parser, effects=DEFAULTS.effects, method=DEFAULTS.method)
@@ -84,7 +84,7 @@ def add_parser(subparsers) -> None:
 
 def add_config_option(parser, name: str, degrees: bool = False, default: float | None = None) -> None:
     """``--NAME`` for the OnlineConfig field ``name``: its default (unless ``default``), unit, range
-    and description from the one definition (``online_config``); ``degrees``: an angle given in deg."""
+    and description from the one definition (``online.config``); ``degrees``: an angle given in deg."""
     s = spec(OnlineConfig, name)
     scale = math.degrees(1.0) if degrees else 1.0
     unit = "deg" if degrees else s.unit

@@ -12,9 +12,9 @@ import json
 from pathlib import Path
 
 from ..errors import CommandError
-from ..io import DEFAULT_TOPICS, write_simulation
-from ..simulator import MANEUVERS, VESSELS, simulate
-from ..structure import parse_effects
+from ..io.files import DEFAULT_TOPICS, write_simulation
+from ..model.simulator import MANEUVERS, VESSELS, simulate
+from ..model.structure import parse_effects
 from ..threedof import VESSELS as THREEDOF_VESSELS
 from .threedof import DEFAULT_VESSEL as THREEDOF_VESSEL
 from .threedof import add_threedof_args, run_simulate

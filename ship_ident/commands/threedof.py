@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import CommandError
 from ..estimators.tlssvm import TRUNCATION_RULES
-from ..jsonio import dumps_json
+from ..io.jsonio import dumps_json
 from ..threedof import DOFS, X_TERMS, YN_TERMS, Coefficients, Record, identify, predict, prediction_metrics
 from ..threedof.data import DEFAULT_VELOCITY_TOPIC, load_records, write_record
 from ..threedof.marin import approach_speed

@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..dataset import DataError, Dataset
-from ..integrate import substeps_for
-from ..metrics import effective_sample_fraction, free_run_fit
-from ..signals import Signals, compute_signals
-from ..structure import Regression, Structure, fastest_time_constant, nomoto_view
+from ..model.dataset import DataError, Dataset
+from ..model.integrate import substeps_for
+from ..model.metrics import effective_sample_fraction, free_run_fit
+from ..model.signals import Signals, compute_signals
+from ..model.structure import Regression, Structure, fastest_time_constant, nomoto_view
 
 Z_95 = 1.96  # two-sided 95 % point of the normal distribution
 MIN_RUDDER_STD = np.radians(1.0)  # rad: below this the rudder does not excite the hull

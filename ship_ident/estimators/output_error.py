@@ -57,10 +57,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import sparse
 
-from ..dataset import Dataset, cut_segments
-from ..effects import BOUND_SHARE, slow_time_constant
-from ..noise import robust_std
-from ..structure import ACCELERATION_NAMES, Structure
+from ..model.dataset import Dataset, cut_segments
+from ..model.effects import BOUND_SHARE, slow_time_constant
+from ..model.noise import robust_std
+from ..model.structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
 from .shooting import ShootingProblem
 

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..innovations import innovation_filter, noise_model
+from .innovations import innovation_filter, noise_model
 from .output_error import OutputError
 
 

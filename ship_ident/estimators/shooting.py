@@ -19,8 +19,8 @@ from dataclasses import replace
 import numpy as np
 from scipy import sparse
 
-from ..dataset import Dataset
-from ..structure import Structure
+from ..model.dataset import Dataset
+from ..model.structure import Structure
 
 STEP_SHARE = 1e-6  # forward-difference step: this share of each unknown's magnitude ...
 STEP_FLOOR = 1e-2  # ... or of this (SI units) for an unknown near zero

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..noise import robust_std
+from ..model.noise import robust_std
 from .base import RegressionEstimator, Solution, column_scales
 from .lssvm import ridge_primal
 

@@ -14,8 +14,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import DataError, resample_signals
-from ..io import FLOAT64, THREEDOF_SYNONYMS, TWIST_STAMPED, BagWriter, Topics, csv_column_map, read_samples, typestore
+from ..io.files import (
+    FLOAT64,
+    THREEDOF_SYNONYMS,
+    TWIST_STAMPED,
+    BagWriter,
+    Topics,
+    csv_column_map,
+    read_samples,
+    typestore,
+)
+from ..model.dataset import DataError, resample_signals
 from .model import Record
 
 DEFAULT_VELOCITY_TOPIC = "/usv/velocity"

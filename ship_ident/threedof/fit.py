@@ -9,7 +9,7 @@ import numpy as np
 
 from ..estimators.lssvm import OLS
 from ..estimators.tlssvm import TLSSVM, TRUNCATION_RULES
-from ..metrics import effective_sample_fraction, signal_metrics
+from ..model.metrics import effective_sample_fraction, signal_metrics
 from .model import DOFS, Coefficients, Record, _regression_matrices, run_model
 
 METHODS = ("ols",) + tuple(f"tlssvm-{rule}" for rule in TRUNCATION_RULES)  # equation-error solvers

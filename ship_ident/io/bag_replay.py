@@ -7,7 +7,7 @@ input topics and the node's outputs ``/ship_ident/estimate`` (the JSON
 record) and ``/ship_ident/parameters`` at the refit times, and with
 ``diagnosis_period`` set ``/ship_ident/diagnosis`` (JSON) and
 ``/ship_ident/held_out_error`` (rad/s) at the refits where a diagnosis
-finished (``online_diagnosis``, run inline: reproducible), complete even
+finished (``diagnosis.onboard``, run inline: reproducible), complete even
 when a ``stop`` event ends the replay early. The MCAP also holds
 ``/ship_ident/predicted_yaw_rate`` at the yaw-rate samples' times
 (``outputs.YawRatePrediction``), ``/ship_ident/gain_band``, ``/diagnostics``
@@ -28,13 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .dataset import DataError
-from .io import FLOAT64, BagWriter, Sample, Topics, read_samples, typestore
-from .jsonio import dumps_json
-from .online import OnlineIdentifier, RefitRecord, run_schedule
-from .online_config import OnlineConfig
-from .online_diagnosis import OnlineDiagnosis
-from .outputs import (
+from ..diagnosis.onboard import OnlineDiagnosis
+from ..model.dataset import DataError
+from ..online.config import OnlineConfig
+from ..online.identifier import OnlineIdentifier, RefitRecord, run_schedule
+from ..online.outputs import (
     DIAGNOSTIC_NAME,
     GAIN_BAND_LABELS,
     PREDICTION_FRAME,
@@ -44,6 +42,8 @@ from .outputs import (
     gain_band,
     trusted_parameters,
 )
+from .files import FLOAT64, BagWriter, Sample, Topics, read_samples, typestore
+from .jsonio import dumps_json
 
 NODE = "/ship_ident"  # the node's default name: replay writes its topics as it publishes them
 ESTIMATE_TOPIC = f"{NODE}/estimate"

@@ -43,7 +43,7 @@ def ros_environment(domain_id: int, log_dir) -> dict:
 
 def start_node(env: dict, *parameters: str, params_file=CONFIG, **popen) -> subprocess.Popen:
     """``identifier_node`` as a child process; ``parameters`` are ``name:=value`` overrides."""
-    command = [sys.executable, "-m", "ship_ident.node", "--ros-args"]
+    command = [sys.executable, "-m", "ship_ident.ros.node", "--ros-args"]
     if params_file:
         command += ["--params-file", str(params_file)]
     for parameter in parameters:

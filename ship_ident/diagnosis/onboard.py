@@ -58,7 +58,11 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from .dataset import DataError, Dataset
+from ..estimators.base import excitation_shortfall
+from ..model.dataset import DataError, Dataset
+from ..model.effects import EFFECTS
+from ..model.metrics import effective_sample_fraction
+from ..model.structure import StructureError
 from .diagnose import DEFAULT_METHOD as DIAGNOSIS_METHOD
 from .diagnose import (
     EQUIVALENT_MARGIN,
@@ -72,10 +76,6 @@ from .diagnose import (
     diagnose,
     free_run,
 )
-from .effects import EFFECTS
-from .estimators.base import excitation_shortfall
-from .metrics import effective_sample_fraction
-from .structure import StructureError
 
 CHECK_DIAGNOSES = 2  # an added effect must cut the held-out error within this many diagnoses
 WORST_SHOWN = 3  # worst free-run segments (with their conditions) in the record

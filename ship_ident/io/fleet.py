@@ -2,7 +2,7 @@
 
 ``ship-ident replay BAG... [--jobs N] [--dask ADDRESS|local] [--table OUT.csv] [--plot-dir DIR]``
 replays every bag exactly as ``ship-ident replay`` replays one (the node's
-``OnlineIdentifier``, the bag's time as its clock: ``bag_replay.replay_bag``) in ``identify_bag``, one
+``OnlineIdentifier``, the bag's time as its clock: ``io.bag_replay.replay_bag``) in ``identify_bag``, one
 bag per task. ``--jobs N`` spreads the bags over N local processes
 (``concurrent.futures.ProcessPoolExecutor``); ``--dask ADDRESS`` sends the
 same tasks to a running Dask scheduler, ``--dask local`` starts a local Dask
@@ -37,12 +37,12 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
+from ..estimators.base import Z_95
+from ..model.dataset import DataError
+from ..online.config import ConfigError, OnlineConfig
+from ..online.samples import Topics
 from .bag_replay import replay_bag
-from .dataset import DataError
-from .estimators.base import Z_95
 from .jsonio import dumps_json
-from .online_config import ConfigError, OnlineConfig
-from .samples import Topics
 
 UNIX_TIME_AFTER_2001 = 1e9  # s: bag stamps above this are wall-clock dates
 

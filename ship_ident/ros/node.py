@@ -14,7 +14,7 @@ band), ``~/predicted_yaw_rate`` (Vector3Stamped, rad/s in z: the estimate in
 force run free from the measured state in runs of ``prediction_horizon`` s,
 one value per yaw-rate sample, stamped with the sample's time and published
 when its run ends) and ``/diagnostics``.
-Every ``diagnosis_period`` the window is diagnosed (``online_diagnosis``) in a
+Every ``diagnosis_period`` the window is diagnosed (``diagnosis.onboard``) in a
 child process at low priority, off the refit path: ``~/diagnosis`` (JSON
 String: verdict, candidates, held-out error, noise floor, the ``ros2 param
 set`` that adds the missing effect), ``~/held_out_error`` and
@@ -57,13 +57,13 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
-from .estimate_log import EstimateLog
-from .io import FLOAT64, IMU, Sample, imu_samples
-from .jsonio import dumps_json
-from .online import OnlineIdentifier
-from .online_config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
-from .online_diagnosis import MIN_WINDOW_S, DiagnosisWorker, OnlineDiagnosis
-from .outputs import (
+from ..diagnosis.onboard import MIN_WINDOW_S, DiagnosisWorker, OnlineDiagnosis
+from ..io.files import FLOAT64, IMU, Sample, imu_samples
+from ..io.jsonio import dumps_json
+from ..online.config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
+from ..online.estimate_log import EstimateLog
+from ..online.identifier import OnlineIdentifier
+from ..online.outputs import (
     DIAGNOSTIC_NAME,
     GAIN_BAND_LABELS,
     PREDICTION_FRAME,
@@ -106,7 +106,7 @@ LATCHED = QoSProfile(
 
 def parameter_descriptors() -> dict:
     """{name: (default, ParameterDescriptor)} of every node parameter, built from its one definition
-    (``online_config``): description with the unit, range, registry names, read-only."""
+    (``online.config``): description with the unit, range, registry names, read-only."""
     out = {}
     for name, (default, s) in specs(*NODE_PARAMETERS).items():
         descriptor = ParameterDescriptor(

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .jsonio import dumps_json
-from .online_config import ESTIMATE_LOG_MIN_BYTES, ConfigError
+from ..io.jsonio import dumps_json
+from .config import ESTIMATE_LOG_MIN_BYTES, ConfigError
 
 
 class EstimateLog:

@@ -38,8 +38,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import Stores, get_typestore
 
-from .dataset import DataError, Dataset, resample_series
-from .samples import ROLES, Sample, Topics
+from ..model.dataset import DataError, Dataset, resample_series
+from ..online.samples import ROLES, Sample, Topics
 
 CSV_COLUMNS = ("t", "rudder", "heading", "yaw_rate", "speed")  # speed optional
 # Column names read as each role without --columns (matched case-insensitively, SI units only),

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .online_config import OnlineConfig
+from .config import OnlineConfig
 from .samples import ROLES, Sample
 
 REQUIRED_ROLES = ("rudder", "heading", "yaw_rate")

@@ -49,13 +49,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from .dataset import Dataset, cut_segments
-from .effects import slow_time_constant
-from .estimators.base import REFERENCE_RELATIVE_ERRORS, scaled_inverse
-from .estimators.shooting import ShootingProblem
-from .metrics import effective_sample_fraction
-from .noise import SENSOR_RESOLUTION
-from .structure import Structure
+from ..estimators.base import REFERENCE_RELATIVE_ERRORS, scaled_inverse
+from ..estimators.shooting import ShootingProblem
+from ..model.dataset import Dataset, cut_segments
+from ..model.effects import slow_time_constant
+from ..model.metrics import effective_sample_fraction
+from ..model.noise import SENSOR_RESOLUTION
+from ..model.structure import Structure
 
 CONFIRMATIONS = 2  # refits in a row above the ratio before a change is declared
 SHORT_RATIO_FACTOR = 4.0  # the newest refit period's error must exceed this many times the ratio

@@ -13,7 +13,7 @@ the last good one when this window could not give one), the window it came
 from, the model's predicted yaw rate at the window end, and the conditions
 found (no data, stale input, gap, too little excitation, poor fit, implausible
 units or signs, ...), each with a severity OK / WARN / ERROR and a sentence.
-The configuration is ``online_config.OnlineConfig``, the checks of the inputs
+The configuration is ``online.config.OnlineConfig``, the checks of the inputs
 ``input_checks``; the node's estimate log (a file writer) ``estimate_log``.
 """
 
@@ -28,6 +28,19 @@ from itertools import chain
 
 import numpy as np
 
+from ..estimators import make_estimator
+from ..estimators.base import (
+    MAX_RELATIVE_ERRORS,
+    TRUSTED_RELATIVE_ERRORS,
+    Z_95,
+    Estimate,
+    excitation_shortfall,
+    loose_parameters,
+)
+from ..model.dataset import DataError, Dataset, cut_segments, resample_series
+from ..model.effects import slow_time_constant
+from ..model.metrics import free_run_fit, noise_limited_correlation
+from ..model.structure import Structure, StructureError
 from .change import (
     CHANGED_PARAMETERS,
     GAIN_FIT_SPAN,
@@ -36,17 +49,7 @@ from .change import (
     fit_gain,
     with_held_errors,
 )
-from .dataset import DataError, Dataset, cut_segments, resample_series
-from .effects import slow_time_constant
-from .estimators import make_estimator
-from .estimators.base import (
-    MAX_RELATIVE_ERRORS,
-    TRUSTED_RELATIVE_ERRORS,
-    Z_95,
-    Estimate,
-    excitation_shortfall,
-    loose_parameters,
-)
+from .config import OnlineConfig
 from .input_checks import (
     REJECTIONS,
     heading_plausibility,
@@ -56,10 +59,7 @@ from .input_checks import (
     value_rejection,
     window_truncation,
 )
-from .metrics import free_run_fit, noise_limited_correlation
-from .online_config import OnlineConfig
 from .samples import ROLES, Sample
-from .structure import Structure, StructureError
 
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
@@ -85,7 +85,7 @@ CONDITION_LEVELS = {
     "rudder_saturated": WARN,
     "wrong_message_type": WARN,  # reported by the node (ROS graph)
     "estimate_log_failed": WARN,  # reported by the node
-    "missing_effect": WARN,  # reported by the diagnosis on board (online_diagnosis)
+    "missing_effect": WARN,  # reported by the diagnosis on board (diagnosis.onboard)
 }
 
 # Trust in a new estimate against the last good one (see OnlineIdentifier._distrust).
@@ -170,7 +170,7 @@ class RefitRecord:
     measured_yaw_rate: float = math.nan  # rad/s at the window end
     compute_seconds: float = 0.0  # wall time of the refit
     counts: dict = field(default_factory=dict)  # cumulative input counts by outcome
-    diagnosis: dict | None = None  # the diagnosis that finished at this refit (online_diagnosis), if any
+    diagnosis: dict | None = None  # the diagnosis that finished at this refit (diagnosis.onboard), if any
 
     @property
     def level(self) -> int:
@@ -985,7 +985,7 @@ def run_schedule(identifier: OnlineIdentifier, samples, diagnosis=None):
     This is the node's loop with the bag's time for the node's clock: a refit
     due at a sample's time, or one a change found between refits calls for
     (``watch``), runs on everything that arrived before it.
-    ``diagnosis`` (an ``online_diagnosis.OnlineDiagnosis``) runs on the window after each refit
+    ``diagnosis`` (an ``diagnosis.onboard.OnlineDiagnosis``) runs on the window after each refit
     when due; an effect it adds or removes by itself takes effect from the next refit.
     """
     for sample in samples:

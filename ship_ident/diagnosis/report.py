@@ -12,8 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..estimators.base import Z_95  # noqa: E402
 from .diagnose import Diagnosis, covered, signal_table  # noqa: E402
-from .estimators.base import Z_95  # noqa: E402
 
 DEG = np.degrees(1.0)
 DPI = 80

@@ -15,12 +15,12 @@ import threading
 
 import numpy as np
 
-from .dataset import DataError, resample_series
-from .estimators.base import Z_95
-from .online import CONDITION_LEVELS, RefitRecord
-from .online_config import OnlineConfig
+from ..estimators.base import Z_95
+from ..model.dataset import DataError, resample_series
+from ..model.structure import Structure, StructureError
+from .config import OnlineConfig
+from .identifier import CONDITION_LEVELS, RefitRecord
 from .samples import ROLES, Sample
-from .structure import Structure, StructureError
 
 GAIN_BAND_LABELS = ("K_low95", "K", "K_high95")
 DIAGNOSTIC_NAME = "ship_ident: identification"

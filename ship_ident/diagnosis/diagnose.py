@@ -53,14 +53,14 @@ from multiprocessing import get_context
 
 import numpy as np
 
-from .dataset import DataError, Dataset, cut_segments
-from .effects import EFFECTS, Evidence, StartContext, heading_harmonics, yaw_time_constant
-from .estimators import Estimate, make_estimator, regression_method
-from .estimators.base import Z_95
-from .integrate import forcing as yaw_forcing
-from .metrics import effective_sample_fraction, free_run_fit, signal_metrics
-from .signals import Signals, compute_signals
-from .structure import Structure, nomoto_parameters
+from ..estimators import Estimate, make_estimator, regression_method
+from ..estimators.base import Z_95
+from ..model.dataset import DataError, Dataset, cut_segments
+from ..model.effects import EFFECTS, Evidence, StartContext, heading_harmonics, yaw_time_constant
+from ..model.integrate import forcing as yaw_forcing
+from ..model.metrics import effective_sample_fraction, free_run_fit, signal_metrics
+from ..model.signals import Signals, compute_signals
+from ..model.structure import Structure, nomoto_parameters
 
 DEFAULT_METHOD = "rlssvm+oe"  # cheap start + output-error refinement: the fits dominate the run time
 TRAINING_FRACTION = 0.65  # first part of the record for fitting, the rest is held out

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import solve_discrete_are
 
-from .integrate import advance
+from ..model.integrate import advance
 
 
 @dataclass(frozen=True)
@@ -59,9 +59,30 @@ class NoiseModel:
 def noise_model(
     structure, params: dict, h: float, substeps: int, rudder_noise: float, heading_noise: float, yaw_rate_noise: float
 ) -> NoiseModel:
-    """Linearise the compiled integrator of ``structure`` (a ``Structure``) at rest for one sample
-    of length h (s): its linear terms only (a linear damping moved to the forcing in the
-    acceleration form); the effects' nonlinear terms vanish to first order there."""
+    """The linear noise model of a structure: its compiled integrator linearised at rest.
+
+    One sample of length h is one step; only the linear terms are kept (a linear damping moved to
+    the forcing in the acceleration form), since the effects' nonlinear terms vanish to first order
+    at rest.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model structure.
+    params : dict
+        Its parameters (SI).
+    h : float
+        Sample time (s).
+    substeps : int
+        RK4 steps per sample.
+    rudder_noise, heading_noise, yaw_rate_noise : float
+        White noise standard deviations of the rudder (rad), heading (rad) and yaw rate (rad/s).
+
+    Returns
+    -------
+    NoiseModel
+        State matrices of one sample and the noise levels.
+    """
     order = structure.order
     (K, T1, T2, T3), terms = structure.kernel(params)
     linear = [t for t in terms if t.r_power == 1 and t.abs_power == 0 and t.harmonic == 0]
@@ -109,7 +130,18 @@ class InnovationFilter:
 
 
 def innovation_filter(model: NoiseModel) -> InnovationFilter:
-    """Solve the filter Riccati equation of the correlated-noise model (scipy's DARE, cross term s)."""
+    """The steady Kalman filter of the correlated-noise model (Riccati equation, scipy's DARE).
+
+    Parameters
+    ----------
+    model : NoiseModel
+        The linear noise model (``noise_model``).
+
+    Returns
+    -------
+    InnovationFilter
+        Its gain and the whitening of its innovations.
+    """
     A, C, n = model.A, model.C, model.A.shape[0]
     s2 = model.rudder_noise**2
     g = A @ model.b1 + model.b0
@@ -151,7 +183,7 @@ def _whiten(A, gain, C, s_inv_sqrt, errors):
 def spectral_fisher_information(
     model: NoiseModel, slopes: list, n_samples: int, n_frequencies: int = 4096
 ) -> np.ndarray:
-    """Whittle's Fisher information carried by the noise's spectrum alone,
+    """Whittle's Fisher information carried by the noise's spectrum alone.
 
         F_ij = (N / 2) mean_omega tr(Phi^-1 dPhi_i Phi^-1 dPhi_j),
 
@@ -159,7 +191,24 @@ def spectral_fisher_information(
     + diag(s_psi^2 |1 - e^{-i omega}|^2, s_r^2), D = diag(1 - e^{-i omega}, 1) (differencing the
     heading makes the rudder-noise walk stationary without changing the information).
     ``slopes`` holds, per parameter theta_j, (model at theta_j + step, model at theta_j - step,
-    2 step): dPhi_j by central difference."""
+    2 step): dPhi_j by central difference.
+
+    Parameters
+    ----------
+    model : NoiseModel
+        The noise model at the estimate.
+    slopes : list
+        Per parameter, (model at theta + step, model at theta - step, 2 step).
+    n_samples : int
+        Number of samples N of the record.
+    n_frequencies : int
+        Frequencies of the mean over omega.
+
+    Returns
+    -------
+    numpy.ndarray
+        The Fisher information matrix (one row and column per parameter).
+    """
     omega = (np.arange(n_frequencies) + 0.5) * 2 * np.pi / n_frequencies
     diff = np.stack([1 - np.exp(-1j * omega), np.ones_like(omega)], axis=1)
 

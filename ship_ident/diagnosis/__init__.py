@@ -1,0 +1,1 @@
+"""Diagnosis: where a model and the measurements part, which effect is missing, offline and on board."""

@@ -1,0 +1,1 @@
+"""Adapters between files and the core: bags and CSV, strict JSON, bag replay, fleet re-identification."""

@@ -1,0 +1,1 @@
+"""Online identification: the sliding window, refits, trust, change detection and what is published; no ROS."""

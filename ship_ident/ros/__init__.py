@@ -1,0 +1,1 @@
+"""The ROS 2 doors: the identification node and the live demo."""

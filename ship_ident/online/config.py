@@ -447,7 +447,7 @@ def with_table(markdown: str) -> str:
 
 def main(root=None) -> int:
     """Rewrite config/ship_ident.yaml and the table in docs/node.md from the definitions."""
-    root = Path(root or Path(__file__).resolve().parent.parent)
+    root = Path(root or Path(__file__).resolve().parents[2])  # the repository: ship_ident/online/config.py
     (root / "config" / "ship_ident.yaml").write_text(parameter_file())
     docs = root / "docs" / "node.md"
     docs.write_text(with_table(docs.read_text()))

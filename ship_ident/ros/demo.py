@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the repository: ship_ident/ros/demo.py
 BAG = ROOT / "bags" / "demo_seed001.mcap"
 TRUTH = ROOT / "bags" / "demo_seed001.truth.json"
 CONFIG = ROOT / "config" / "ship_ident.yaml"

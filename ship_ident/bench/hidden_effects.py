@@ -279,6 +279,7 @@ def run_mmg_hull(seed: int) -> dict:
         "rmse_heading_deg": float(np.degrees(result.run.fit["rmse_heading"])),
         "verdict": result.verdict,
         "top": top.effect,
+        "top_model": top.estimate.structure.model if top.estimate else None,
         "top_improvement_heading": top.improvement_heading,
         "top_determined": not undetermined,
         "top_undetermined": undetermined,
@@ -310,7 +311,7 @@ def run_mmg(quick: bool = False, seed: int = 0, count: int | None = None) -> dic
         progress(
             f"hidden-effects mmg {k + 1}/{count}: {row['hull']} (seed {hull_seed}, "
             f"{'course-unstable' if row['course_unstable'] else 'course-stable'}): held-out heading error "
-            f"{row['rmse_heading_deg']:.1f} deg; first {row['top']} "
+            f"{row['rmse_heading_deg']:.1f} deg; first {row['top']} on {row['top_model']} "
             f"{100 * row['top_improvement_heading']:.0f} %"
             + ("" if row["top_determined"] else f" ({', '.join(row['top_undetermined'])} undetermined)")
             + f", {row['verdict']}; halving: {', '.join(row['halving']) or 'none'}"
@@ -340,6 +341,7 @@ def run_mmg(quick: bool = False, seed: int = 0, count: int | None = None) -> dic
         "succeeded": share(
             [r["first_halves"] and r["verdict"] == "missing_effect" and r["top_determined"] for r in halved]
         ),
+        "first_on_nomoto1": sum(r["top_model"] == "nomoto1" for r in halved),
         "missing_effect_without_halving": share([r["verdict"] == "missing_effect" for r in rows if not r["halving"]]),
         "per_effect": per_effect,
         "rows": rows,
@@ -378,13 +380,14 @@ def render_mmg(result: dict) -> str:
         f"first candidate halves it: {100 * result['first_halves']:.0f} % of {halved} hulls; verdict missing_effect: "
         f"{100 * result['missing_effect']:.0f} %; every parameter of the first determined: "
         f"{100 * result['determined']:.0f} %; first halves it, missing_effect and every parameter determined: "
-        f"{100 * result['succeeded']:.0f} %",
+        f"{100 * result['succeeded']:.0f} %; the first recommended on nomoto1 (the data determine one pole): "
+        f"{result['first_on_nomoto1']} of {halved}",
         f"hulls without a halving effect called missing_effect: {100 * result['missing_effect_without_halving']:.0f} %",
         "hulls (replay one with run_mmg_hull(seed)):",
     ]
     lines += [
         f"  seed {r['seed']} {r['hull']}: C' {r['stability_index']:+.4f}, pull-out r' {r['pull_out_turn_rate']:.3f}, "
-        f"held-out heading error {r['rmse_heading_deg']:.1f} deg, first {r['top']} "
+        f"held-out heading error {r['rmse_heading_deg']:.1f} deg, first {r['top']} on {r['top_model']} "
         f"{100 * r['top_improvement_heading']:.0f} %"
         + ("" if r["top_determined"] else f" ({', '.join(r['top_undetermined'])} undetermined)")
         + f", {r['verdict']}; halving: {', '.join(r['halving']) or 'none'}"

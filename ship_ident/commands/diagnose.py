@@ -136,12 +136,20 @@ def format_diagnosis(result, source, options: str = "") -> str:
         lines.append(f"      {c.evidence.sentence}")
         if c.extrapolation:
             lines.append(f"      much worse held out: {c.extrapolation}")
+        if c.second_order:
+            lines.append(
+                f"      fitted on {c.estimate.structure.model}: on nomoto2 {', '.join(c.second_order['undetermined'])} "
+                f"undetermined (improvement {100 * c.second_order['improvement']:.1f} % there)"
+            )
+        if c.preferred_over:
+            other = c.preferred_over
+            lines.append(f"      ranked before {other['effect']}: its {', '.join(other['undetermined'])} undetermined")
         if c.near_equivalent:
             lines.append(f"      near-equivalent on these data: {', '.join(c.near_equivalent)}")
-    if result.verdict == "missing_effect":
-        top = result.candidates[0].effect
-        effects = ",".join(result.structure.effect_names + (top,))
+    recommendation = result.recommendation
+    if recommendation is not None:
+        effects = ",".join(recommendation["effects"])
         lines.append(
-            f"next: ship-ident diagnose {source} --model {result.structure.model} --effects {effects}{options}"
+            f"next: ship-ident diagnose {source} --model {recommendation['model']} --effects {effects}{options}"
         )
     return "\n".join(lines)

@@ -140,6 +140,9 @@ class Candidate:
     extrapolation: str | None = None  # why a much worse candidate fails on the held-out data
     training_gain: float = 0.0  # share of the training free-run yaw-rate error it removes
     near_equivalent: list[str] = field(default_factory=list)  # (the first) others the data cannot tell apart
+    second_order: dict | None = None  # the nomoto2 fit's figures when it is recommended on nomoto1 (first_order_view)
+    # (the first) the near-equivalent candidate it was ranked before, whose parameters the data do not determine
+    preferred_over: dict | None = None
 
     def to_json(self) -> dict:
         return {
@@ -159,6 +162,9 @@ class Candidate:
             "extrapolation": self.extrapolation,
             "training_gain": self.training_gain,
             "near_equivalent": self.near_equivalent,
+            "model": None if self.estimate is None else self.estimate.structure.model,
+            "second_order": self.second_order,
+            "preferred_over": self.preferred_over,
         }
 
 
@@ -211,6 +217,16 @@ class Diagnosis:
         return "unexplained"
 
     @property
+    def recommendation(self) -> dict | None:
+        """The model to fit next when an effect is missing: the significant candidate's base model
+        (nomoto1 where the data do not determine a second pole, ``first_order_view``) and effects;
+        None for any other verdict."""
+        best = next((c for c in self.candidates if c.significant), None)
+        if best is None or best.estimate is None:
+            return None
+        return best.estimate.structure.to_json()
+
+    @property
     def verdict_sentence(self) -> str:
         """One sentence a sailor reads: why the verdict."""
         verdict = self.verdict
@@ -219,6 +235,7 @@ class Diagnosis:
             return (
                 f"{best.effect} is missing: adding it removes {100 * best.improvement_heading:.0f} % of the held-out "
                 f"heading and {100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error"
+                + recommendation_sentence(best)
                 + equivalence_sentence(best)
             )
         if verdict == "adequate":
@@ -243,13 +260,13 @@ class Diagnosis:
                 f"; no catalogued effect removes it significantly (best: {best.effect} removes "
                 f"{100 * best.improvement_heading:.0f} % of the heading and {100 * best.improvement_yaw_rate:.0f} % "
                 f"of the yaw-rate error, t {best.t_statistic:.1f} < {SIGNIFICANCE_T:g}: more held-out data, "
-                f"or another manoeuvre, would tell{equivalence_sentence(best)})"
+                f"or another manoeuvre, would tell{recommendation_sentence(best)}{equivalence_sentence(best)})"
             )
         else:
             tail = (
                 f"; no catalogued effect removes it (best: {best.effect}, "
                 f"{100 * best.improvement_yaw_rate:.0f} % of the yaw-rate error, not significant"
-                f"{equivalence_sentence(best)})"
+                f"{recommendation_sentence(best)}{equivalence_sentence(best)})"
             )
         return "; ".join(parts) + tail
 
@@ -259,6 +276,7 @@ class Diagnosis:
         record["verdict"] = self.verdict
         record["verdict_sentence"] = self.verdict_sentence
         record["candidates"] = [c.to_json() for c in self.candidates]
+        record["recommendation"] = self.recommendation
         record["diagnosis"] = {
             "training": {
                 "start": float(self.training.time[0]),
@@ -994,6 +1012,220 @@ def ranking(candidates: list[Candidate]):
     return key
 
 
+# --- one pole where the data show one ----------------------------------------------
+# Parameters only a second-order model has: the fast pole (T2; m2 in the acceleration form) and the
+# rudder lead it comes with (T3; b1). The first-order model keeps the rest: K and T = T1 + T2 - T3
+# (b, a1 in the acceleration form) and every effect's parameters.
+SECOND_ORDER_ONLY = ("T2", "T3", "m2", "b1")
+
+
+def undetermined(estimate: Estimate) -> list[str]:
+    """The parameters ``parameter_warnings`` flags in ``estimate``: pinned at a bound, or with a
+    standard error larger than the value."""
+    return [w["parameter"] for w in parameter_warnings(estimate)]
+
+
+def first_order_start(parameters: dict) -> dict:
+    """Parameters of a first-order (nomoto1) model from those of a second-order one, in the same form.
+
+    Nomoto's first-order approximation of 1 + T3 s over (1 + T1 s)(1 + T2 s) keeps its mean delay:
+    T = T1 + T2 - T3, and K. Where the rudder lead T3 outweighs the fast pole by more than half the
+    slow pole, that would leave too short a delay, and the slow pole T1 is taken. In the
+    acceleration form (both divided by the coefficient of r') b = b0 and a1 carry over, m2 and b1
+    drop. The effects' parameters carry over unchanged (their terms have the same units in both).
+
+    Parameters
+    ----------
+    parameters : dict
+        A nomoto2 parameter set (K 1/s, T1, T2, T3 s; or b0 1/s^2, b1 1/s, m2 s, a1 1/s) with
+        its effects' parameters.
+
+    Returns
+    -------
+    dict
+        The nomoto1 parameter set (K 1/s, T s; or b 1/s^2, a1 1/s) with the same effects' parameters.
+    """
+    out = {k: v for k, v in parameters.items() if k not in ("T1", "T2", "T3", "b0", "b1", "m2")}
+    if "T1" in parameters:
+        delay = parameters["T1"] + parameters["T2"] - parameters["T3"]
+        out["T"] = delay if delay >= 0.5 * parameters["T1"] else parameters["T1"]
+    else:
+        out["b"] = parameters["b0"]
+    return out
+
+
+def first_order_view(
+    candidate: Candidate,
+    estimate: Estimate,
+    training: Dataset,
+    held_out: Dataset,
+    run: FreeRun,
+    fitted_windows: Dataset,
+    fitted_run: FreeRun,
+    method: str,
+) -> Candidate:
+    """The candidate on a first-order base model when the data do not determine a second pole.
+
+    A slow hull's manoeuvres (a tanker's T1 of a minute against a fast pole of a second) show a
+    response that is first order in all but its first seconds: a second-order fit then leaves the
+    fast pole (T2, m2) or the rudder lead (T3, b1) with a standard error beyond its value, and
+    whatever it publishes for them is noise. When ``candidate`` (fitted on a nomoto2 ``estimate``)
+    leaves one of those undetermined, it is refitted on nomoto1 (started from the model's own fit in
+    Nomoto's first-order approximation, ``first_order_start``) and judged on the same held-out free
+    runs against the same model (``run``, and ``fitted_run`` on the training windows). The
+    first-order candidate replaces it when it leaves fewer parameters undetermined, is significant
+    wherever the second-order one is, and removes at least the second-order one's improvement less
+    ``EQUIVALENT_MARGIN`` (about as well: the margin within which the diagnosis calls two
+    candidates near-equivalent). Whether the effect is missing stays judged on the same base model:
+    the first-order candidate is significant only where the second-order one is (a first-order model
+    that runs better than a loose second-order one is no evidence of the effect). The second-order
+    figures stay in ``second_order``.
+
+    Parameters
+    ----------
+    candidate : Candidate
+        The first candidate, judged on the model ``estimate``.
+    estimate : Estimate
+        The model the candidates extend (fitted on ``training``).
+    training, held_out : Dataset
+        The training data and the held-out free-run windows.
+    run, fitted_run : FreeRun
+        The model's free runs on ``held_out`` and on ``fitted_windows`` (the training data cut into
+        the held-out windows' length).
+    fitted_windows : Dataset
+        The training windows.
+    method : str
+        The estimation method (``make_estimator``).
+
+    Returns
+    -------
+    Candidate
+        ``candidate`` itself, or its first-order refit with ``second_order`` set.
+    """
+    fit = candidate.estimate
+    if fit is None or fit.structure.model != "nomoto2" or "low_excitation" in estimate.flags:
+        return candidate
+    loose = undetermined(fit)
+    if not set(loose) & set(SECOND_ORDER_ONLY):
+        return candidate
+    first_order = Structure("nomoto1", estimate.structure.effect_names)
+    nested = first_order_start(estimate.parameters)
+    refit = _refit_task((first_order.adding(candidate.effect), training, method, nested))
+    if isinstance(refit, str):
+        return candidate
+    refit = no_worse(refit, training, method, nested, fitted_windows)
+    view = judge(candidate.effect, candidate.evidence, held_out, run, refit, fitted_windows, fitted_run)
+    if (
+        len(undetermined(refit)) >= len(loose)
+        or (candidate.significant and not view.significant)
+        or view.improvement < candidate.improvement - EQUIVALENT_MARGIN
+    ):
+        return candidate
+    view.significant = candidate.significant  # the evidence that the effect is missing is the same-base comparison
+    view.second_order = {
+        "improvement": candidate.improvement,
+        "improvement_heading": candidate.improvement_heading,
+        "improvement_yaw_rate": candidate.improvement_yaw_rate,
+        "significant": candidate.significant,
+        "undetermined": loose,
+        "units": {k: fit.structure.parameter(k).unit for k in loose},
+        "parameters": {k: float(v) for k, v in fit.parameters.items()},
+        "std_errors": {k: float(v) for k, v in fit.std_errors.items()},
+    }
+    return view
+
+
+def recommend_determined(
+    candidates: list[Candidate],
+    estimate: Estimate,
+    training: Dataset,
+    held_out: Dataset,
+    run: FreeRun,
+    fitted_windows: Dataset,
+    fitted_run: FreeRun,
+    method: str,
+) -> None:
+    """Put first, in place, the ranked candidate the diagnosis recommends: in the form whose
+    parameters the data determine.
+
+    The first candidate is taken in its ``first_order_view``. When that still leaves a parameter
+    undetermined (``undetermined``: a stall coefficient pinned at its bound, a speed exponent or a
+    cubic damping whose error exceeds its value), the candidates the held-out data cannot tell
+    from it (``mark_near_equivalents``: within ``EQUIVALENT_MARGIN`` of its improvement and not
+    significantly worse) are tried in their rank order, each in its own first-order view: the first
+    of them whose parameters are all determined, and that is significant wherever the first is, is
+    ranked first (``preferred_over`` names the one it displaced). Between two models that predict
+    the other manoeuvres alike, the one the data determine is the one to publish. The verdict does
+    not change: only a significant candidate replaces a significant one.
+
+    Parameters
+    ----------
+    candidates : list of Candidate
+        The candidates, ranked (``ranking``); reordered and replaced in place.
+    estimate : Estimate
+        The model the candidates extend.
+    training, held_out, fitted_windows : Dataset
+        The training data, the held-out free-run windows and the training windows.
+    run, fitted_run : FreeRun
+        The model's free runs on ``held_out`` and ``fitted_windows``.
+    method : str
+        The estimation method (``make_estimator``).
+    """
+    if not candidates:
+        return
+    views = (estimate, training, held_out, run, fitted_windows, fitted_run, method)
+    first = candidates[0] = first_order_view(candidates[0], *views)
+    if first.estimate is None or not undetermined(first.estimate):
+        return
+    mark_near_equivalents(candidates, held_out)
+    group, first.near_equivalent = first.near_equivalent, []
+    for name in group:
+        index = next(i for i, c in enumerate(candidates) if c.effect == name)
+        view = first_order_view(candidates[index], *views)
+        if view.estimate is None or undetermined(view.estimate) or (first.significant and not view.significant):
+            continue
+        view.preferred_over = {"effect": first.effect, "undetermined": undetermined(first.estimate)}
+        del candidates[index]
+        candidates.insert(0, view)
+        return
+
+
+def recommendation_sentence(candidate: Candidate) -> str:
+    """Why the diagnosis recommends a candidate in the form it does: on a first-order base model
+    (``first_order_sentence``), before a near-equivalent one (``determined_sentence``); "" when
+    neither applies."""
+    return first_order_sentence(candidate) + determined_sentence(candidate)
+
+
+def determined_sentence(candidate: Candidate) -> str:
+    """Why a candidate ranks before a near-equivalent one ("" when it does not)."""
+    other = candidate.preferred_over
+    if not other:
+        return ""
+    return (
+        f"; ranked before {other['effect']}, which the held-out data cannot tell from it, because these data "
+        f"determine its parameters (not {other['effect']}'s {', '.join(other['undetermined'])})"
+    )
+
+
+def first_order_sentence(candidate: Candidate) -> str:
+    """Why a candidate is recommended on a first-order base model ("" when it is not)."""
+    second = candidate.second_order
+    if not second:
+        return ""
+    figures = ", ".join(
+        f"{name} {second['parameters'][name]:.3g} +- {second['std_errors'].get(name, np.inf):.2g} "
+        f"{second['units'][name]}"
+        for name in second["undetermined"]
+        if name in SECOND_ORDER_ONLY
+    )
+    return (
+        f"; recommended on {candidate.estimate.structure.model} (first order): the data do not determine a "
+        f"second pole ({figures} on nomoto2), and the first-order model removes {100 * candidate.improvement:.0f} % "
+        f"of the held-out error against {100 * second['improvement']:.0f} % on nomoto2"
+    )
+
+
 def mark_near_equivalents(candidates: list[Candidate], held_out: Dataset) -> None:
     """Name in the first candidate the others the held-out data cannot tell from it: their improvement
     within ``EQUIVALENT_MARGIN`` of the first's and at least ``MIN_IMPROVEMENT``, and the first's
@@ -1147,6 +1379,7 @@ def diagnose(
                     "(low_excitation) to tell an effect from the model's own scatter"
                 )
     candidates.sort(key=ranking(candidates))
+    recommend_determined(candidates, estimate, training, held_out, run, fitted_windows, fitted_run, method)
     mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
     tc = yaw_time_constant(estimate.parameters)

@@ -135,6 +135,10 @@ def test_cli_json_follows_the_contract(tmp_path, capsys):
     top = record["candidates"][0]
     assert top["effect"] == "gyro_bias"
     assert {"effect", "improvement", "significant", "rmse_heading_after", "rmse_yaw_rate_after", "evidence"} <= set(top)
+    # a quick USV's second pole is determined: the recommendation stays on nomoto2
+    assert top["model"] == "nomoto2" and top["second_order"] is None
+    assert record["recommendation"] == {"model": "nomoto2", "effects": ["gyro_bias"]}
+    assert "next: ship-ident diagnose" not in captured.out  # --json prints the record alone
     assert "diagnose [" in captured.err  # progress on stderr
 
 

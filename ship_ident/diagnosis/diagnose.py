@@ -1073,13 +1073,14 @@ def first_order_view(
     leaves one of those undetermined, it is refitted on nomoto1 (started from the model's own fit in
     Nomoto's first-order approximation, ``first_order_start``) and judged on the same held-out free
     runs against the same model (``run``, and ``fitted_run`` on the training windows). The
-    first-order candidate replaces it when it leaves fewer parameters undetermined, is significant
-    wherever the second-order one is, and removes at least the second-order one's improvement less
-    ``EQUIVALENT_MARGIN`` (about as well: the margin within which the diagnosis calls two
-    candidates near-equivalent). Whether the effect is missing stays judged on the same base model:
-    the first-order candidate is significant only where the second-order one is (a first-order model
-    that runs better than a loose second-order one is no evidence of the effect). The second-order
-    figures stay in ``second_order``.
+    first-order candidate replaces it when it leaves fewer parameters undetermined and removes at
+    least the second-order one's held-out improvement less ``EQUIVALENT_MARGIN`` (about as well:
+    the margin within which the diagnosis calls two candidates near-equivalent). Whether the effect
+    is missing stays judged on the same base model: the first-order candidate is significant exactly
+    where the second-order one is (a first-order model that runs better than a loose second-order
+    one is no evidence of the effect, and one that misses the rudder lead's first seconds on the
+    training steps, its training gain below the model's, is no evidence against it). The
+    second-order figures stay in ``second_order``.
 
     Parameters
     ----------
@@ -1115,13 +1116,15 @@ def first_order_view(
         return candidate
     refit = no_worse(refit, training, method, nested, fitted_windows)
     view = judge(candidate.effect, candidate.evidence, held_out, run, refit, fitted_windows, fitted_run)
-    if (
-        len(undetermined(refit)) >= len(loose)
-        or (candidate.significant and not view.significant)
-        or view.improvement < candidate.improvement - EQUIVALENT_MARGIN
-    ):
+    if len(undetermined(refit)) >= len(loose) or view.improvement < candidate.improvement - EQUIVALENT_MARGIN:
         return candidate
     view.significant = candidate.significant  # the evidence that the effect is missing is the same-base comparison
+    view.note = "; ".join(
+        [
+            *([view.note] if view.note else []),
+            "fitted on nomoto1; whether the effect is missing is judged on nomoto2, the model's own base",
+        ]
+    )
     view.second_order = {
         "improvement": candidate.improvement,
         "improvement_heading": candidate.improvement_heading,

@@ -33,6 +33,13 @@ without it) and run free on the same held-out windows.
   candidate must remove ``MIN_IMPROVEMENT`` of the yaw-rate error (a
   heading error alone is a random walk that parameter scatter moves by
   half) and improve the training free runs by ``MIN_TRAINING_GAIN``.
+  With other recordings held out, the large-gain path asks only
+  ``MIN_TRAINING_GAIN`` of the training (``judge_across_manoeuvres``).
+* The first candidate is recommended in a form whose parameters the data
+  determine (``recommend_determined``): on nomoto1 where nomoto2 leaves the
+  fast pole undetermined and the first-order fit runs about as well
+  (``first_order_view``), else a near-equivalent candidate whose
+  parameters are all determined ranks first. Neither changes the verdict.
 * ``verdict`` is ``missing_effect`` when any candidate is significant;
   ``adequate`` only when the held-out residual tests pass (white, independent
   of the rudder) and no parameter is pinned at a physical bound; otherwise

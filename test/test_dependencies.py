@@ -138,11 +138,13 @@ def test_the_graph_sees_relative_and_lazy_imports():
 
 
 def test_the_identifier_knows_no_files_and_its_parts_not_the_identifier():
-    """online.identifier is the identifier: its configuration, input checks and the estimate log (the
-    node's file writer) are modules of their own, none of which needs the identifier."""
-    assert {"online.config", "online.input_checks"} <= imported_modules("online.identifier")
+    """online.identifier is the identifier: its configuration, input checks, decisions on a window (the
+    fit, the published uncertainty, the trust policy, the gain follow, their verdicts) and the estimate
+    log (the node's file writer) are modules of their own, none of which needs the identifier."""
+    decisions = {"online.window_fit", "online.uncertainty", "online.trust", "online.gain_follow", "online.verdicts"}
+    assert {"online.config", "online.input_checks"} | decisions <= imported_modules("online.identifier")
     assert "online.estimate_log" not in imported_modules("online.identifier")
-    for part in ("online.config", "online.input_checks", "online.estimate_log"):
+    for part in ("online.config", "online.input_checks", "online.estimate_log", *sorted(decisions)):
         assert "online.identifier" not in imported_modules(part), part
     assert "online.estimate_log" in imported_modules("ros.node")
 

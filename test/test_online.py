@@ -17,7 +17,9 @@ from ship_ident.model.simulator import Noise, random_vessel, simulate
 from ship_ident.online.change import ChangeDetector, fit_gain, variance_change_point, with_held_errors
 from ship_ident.online.config import ConfigError, OnlineConfig
 from ship_ident.online.estimate_log import EstimateLog
-from ship_ident.online.identifier import FOLLOWED_INSTEAD, WATCHES_PER_REFIT, OnlineIdentifier, run_schedule
+from ship_ident.online.identifier import WATCHES_PER_REFIT, OnlineIdentifier, run_schedule
+from ship_ident.online.trust import TrustPolicy
+from ship_ident.online.verdicts import FOLLOWED
 
 
 def stream(dataset, start=0.0, rudder=None):
@@ -369,7 +371,7 @@ def test_heading_in_degrees_is_reported(sim):
     assert len(warned) >= 0.8 * len([r for r in records if r.time >= 35.0])
     # the heading 57x too large wrecks the fit: its standard errors say so and nothing is published
     assert not any(r.new_estimate for r in records)
-    assert "does not determine K" in records[-1].conditions["too_little_excitation"]
+    assert records[-1].verdicts["too_little_excitation"].code == "parameters_undetermined"
     clean = list(
         run_schedule(
             OnlineIdentifier(OnlineConfig(window_length=60.0, min_window_length=30.0)),
@@ -526,28 +528,30 @@ def test_a_jump_beyond_its_uncertainty_or_a_worse_free_run_is_held(sim):
     uncertainty makes the true estimate a jump of many standard errors that its free run justifies
     (accepted); a last good estimate equal to the truth is never replaced by a worse free run."""
     from ship_ident.estimators import make_estimator
-    from ship_ident.online.identifier import _jump
+    from ship_ident.online.trust import largest_jump
 
     config = OnlineConfig()
     window = sim.dataset.slice(0, 1800)
     structure = config.structure()
     estimate = make_estimator(config.method).fit(structure, window)
-    ident = OnlineIdentifier(config)
+    trust = TrustPolicy()
     truth = replace(estimate, parameters=dict(estimate.parameters, **sim.truth))
-    assert ident._distrust(
-        config, structure, estimate, window, truth
-    ) is None or "misses the window more" in ident._distrust(config, structure, estimate, window, truth)
+    verdict = trust.plausibility(config, structure, estimate, window, truth)
+    assert verdict is None or verdict.code == "misses_window"
     wrong = replace(
         estimate,
         parameters=dict(estimate.parameters, K=1.4 * estimate.parameters["K"]),
         std_errors=dict(estimate.std_errors, K=1e-4),
     )
-    assert _jump(estimate, wrong)[0] > 100
-    assert ident._distrust(config, structure, estimate, window, wrong) is None  # its free run is clearly better
-    reason = ident._distrust(config, structure, wrong, window, estimate)
-    assert "misses the window more" in reason and "deg/s" in reason
+    assert largest_jump(estimate, wrong)[0] > 100
+    assert trust.plausibility(config, structure, estimate, window, wrong) is None  # its free run is clearly better
+    reason = trust.plausibility(config, structure, wrong, window, estimate)
+    assert reason.code == "misses_window" and reason.keeping
+    assert reason.figures["new_mean_square"] > 1.25 * reason.figures["old_mean_square"]
+    assert "misses the window more" in reason.sentence and "deg/s" in reason.sentence  # worded in deg/s
     bound = replace(estimate, parameters=dict(estimate.parameters, T1=1000.0))
-    assert "T1 = 1000 s on its bound 1000" in ident._distrust(config, structure, bound, window, None)
+    on_bound = trust.plausibility(config, structure, bound, window, None)
+    assert on_bound.code == "on_bound" and on_bound.figures["bounds"] == [("T1", 1000.0, "s", 1000.0)]
 
 
 def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
@@ -557,7 +561,7 @@ def test_published_uncertainty_covers_the_scatter_of_successive_estimates():
     errors as the windows move (a missed effect) get about 3.5 times their errors; estimates that
     scatter within their errors keep them; 14 errors apart alternately, far wider errors."""
     from ship_ident.estimators.base import Estimate
-    from ship_ident.online.identifier import EstimateScatter
+    from ship_ident.online.uncertainty import EstimateScatter
 
     structure = OnlineConfig(model="nomoto1", effects=()).structure()
     fresh = 5.0 / 180.0
@@ -641,8 +645,9 @@ def test_min_rudder_std_below_the_default_floor_is_honoured():
     lowered = refit_at_60_s(OnlineConfig(min_rudder_std=np.radians(0.5), **window))
     assert lowered.new_estimate and "too_little_excitation" not in lowered.conditions
     assert abs(lowered.estimate["parameters"]["K"] / sim.truth["K"] - 1) < 0.05
-    refused = refit_at_60_s(OnlineConfig(**window)).conditions["too_little_excitation"]
-    assert "(the rudder hardly moves): rudder std 0.68 deg (need 1.00)" in refused
+    refused = refit_at_60_s(OnlineConfig(**window)).verdicts["too_little_excitation"]
+    assert refused.code == "below_floors"
+    assert "(the rudder hardly moves): rudder std 0.68 deg (need 1.00)" in refused.figures["shortfall"]
 
 
 @pytest.mark.slow
@@ -831,7 +836,7 @@ def test_the_gain_is_followed_while_full_fits_of_the_new_data_are_refused():
         for r in records
         if r.window[1] - r.window[0] >= config.min_window_length
         and r.new_estimate
-        and any(FOLLOWED_INSTEAD in sentence for sentence in r.conditions.values())
+        and any(verdict.keeping == FOLLOWED for verdict in r.verdicts.values())
     ]
     assert followed and all(abs(r.estimate["parameters"]["K"] / k_new - 1) < 0.02 for r in followed)
 
@@ -852,8 +857,9 @@ def test_a_loose_full_fit_after_a_change_does_not_replace_the_followed_gain():
     recovered = recovery_time(times, ks, change, k_new)
     assert recovered <= 15.0
     assert all(abs(k / k_new - 1) < 0.05 for t, k in zip(times, ks) if t >= change + recovered)
-    held = [r for r in records if "a full fit is trusted" in r.conditions.get("uncertain_estimate", "")]
-    assert held and all(FOLLOWED_INSTEAD in r.conditions["uncertain_estimate"] for r in held)
+    held = [r.verdicts["uncertain_estimate"] for r in records if "uncertain_estimate" in r.verdicts]
+    held = [v for v in held if v.code in ("followed_gain_kept", "better_gain_kept")]
+    assert held and all(v.keeping == FOLLOWED for v in held)
 
 
 @pytest.mark.slow
@@ -959,7 +965,7 @@ def test_a_last_good_estimate_that_diverges_blocks_nothing(sim):
     estimate = make_estimator(config.method).fit(structure, window)
     runaway = replace(estimate, parameters=dict(estimate.parameters, alpha=-100.0 / np.max(window.yaw_rate) ** 2))
     assert not np.all(np.isfinite(structure.simulate(runaway.parameters, window)[1]))
-    assert OnlineIdentifier(config)._distrust(config, structure, estimate, window, runaway) is None
+    assert TrustPolicy().plausibility(config, structure, estimate, window, runaway) is None
 
 
 def test_fit_quality_is_judged_against_what_the_noise_allows():
@@ -987,7 +993,8 @@ def test_a_hull_whose_rudder_lead_cancels_its_lag_publishes_T1_as_uncertain():
     records = [r for r in run_schedule(OnlineIdentifier(OnlineConfig()), stream(sim.dataset)) if r.new_estimate]
     uncertain = [r for r in records if "uncertain_estimate" in r.conditions]
     assert len(uncertain) >= 10 and all(r.status == "WARN" for r in uncertain)
-    assert re.search(r"T1 [0-9.]+ \+- [0-9.]+ \([0-9]+ %", uncertain[0].conditions["uncertain_estimate"])
+    verdict = uncertain[0].verdicts["uncertain_estimate"]
+    assert verdict.code == "published_uncertain" and "T1" in verdict.figures["loose"]
     for r in records:
         assert abs(r.estimate["parameters"]["K"] / truth["K"] - 1) < 0.02
         if r.status == "OK":

@@ -207,10 +207,12 @@ class Diagnosis:
 
     @property
     def structure(self) -> Structure:
+        """The base model that was diagnosed (its estimate's structure)."""
         return self.estimate.structure
 
     @property
     def pinned(self) -> list[dict]:
+        """The warnings of parameters on a physical bound (kind 'at_lower_bound' or 'at_upper_bound')."""
         return [w for w in self.parameter_warnings if w["kind"].startswith("at_")]
 
     @property
@@ -278,6 +280,15 @@ class Diagnosis:
         return "; ".join(parts) + tail
 
     def to_json(self) -> dict:
+        """The diagnosis as ``ship-ident diagnose --json`` writes it.
+
+        Returns
+        -------
+        dict
+            The base estimate's record (SI units) with the held-out fit, the verdict and its sentence,
+            every candidate effect's figures, and the training and held-out windows (s), noise levels
+            and worst segments.
+        """
         record = self.estimate.to_json()
         record["fit"] = dict(self.run.fit, data="held-out")
         record["verdict"] = self.verdict

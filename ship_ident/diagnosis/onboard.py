@@ -403,10 +403,12 @@ def _serve(connection) -> None:
 
 
 class DiagnosisWorker:
-    """Runs diagnoses in one child process at low priority (``NICENESS``), one at a time, so a
-    refit never waits for one. The child starts with ``start`` (the node: at its start, so that its
+    """Runs diagnoses in one child process at low priority, one at a time, so a refit never waits for one.
+
+    The child runs at ``NICENESS`` and starts with ``start`` (the node: at its start, so that its
     imports run while the window fills) or at the first diagnosis (``spawn``: a fresh interpreter,
-    never a fork of the ROS process and its threads)."""
+    never a fork of the ROS process and its threads).
+    """
 
     def __init__(self):
         self._process = self._connection = None
@@ -428,12 +430,27 @@ class DiagnosisWorker:
             child.close()
 
     def submit(self, job: tuple) -> None:
+        """Start a diagnosis in the child (starting the child if it is not running).
+
+        Parameters
+        ----------
+        job : tuple
+            (window Dataset, model, effects, stamp s, end of the last held-out data s), as
+            ``OnlineDiagnosis`` queues it.
+        """
         self.start()
         self._job = (job[3], job[1], job[2])
         self._connection.send(job)
 
     def poll(self) -> dict | None:
-        """The finished diagnosis, or None while it runs (a dead child: a skipped record)."""
+        """The finished diagnosis, or None while it runs (a dead child: a skipped record).
+
+        Returns
+        -------
+        dict or None
+            The diagnosis record (``diagnosis.onboard``'s JSON), or None while it runs or when none was
+            submitted.
+        """
         if self._job is None:
             return None
         stamp, model, effects = self._job
@@ -469,15 +486,23 @@ class Trial:
 
 
 class OnlineDiagnosis:
-    """Diagnoses the identifier's window every ``diagnosis_period`` (its configuration, read at
-    each refit; 0: off) through ``runner`` (``InlineRunner`` by default, ``DiagnosisWorker`` on the
-    node); pools the held-out evidence since the model or the vessel last changed and runs
-    ``auto_add_effects``.
+    """The diagnosis on board: the identifier's window diagnosed every ``diagnosis_period``.
+
+    Diagnoses the window every ``diagnosis_period`` (its configuration, read at each refit; 0: off)
+    through ``runner``; pools the held-out evidence since the model or the vessel last changed and
+    runs ``auto_add_effects``.
 
     ``after_refit(record, identifier)`` is called after every refit: it starts a due diagnosis,
     puts a finished one into ``record.diagnosis`` and the ``missing_effect`` WARN into
     ``record.conditions``, and returns the effects to set when auto-add adds or removes one
-    (None otherwise). ``node`` names the node in the ``ros2 param set`` command of the record.
+    (None otherwise).
+
+    Parameters
+    ----------
+    runner : InlineRunner or DiagnosisWorker or None
+        Where diagnoses run: inline by default (``replay``), a low-priority child on the node.
+    node : str
+        The node's name in the ``ros2 param set`` command of the record.
     """
 
     def __init__(self, runner=None, node: str = "/ship_ident"):
@@ -499,6 +524,24 @@ class OnlineDiagnosis:
         self._asked: tuple | None = None  # effects auto-add asked for (its own change, not an outside one)
 
     def after_refit(self, record, identifier) -> tuple | None:
+        """After a refit: start a due diagnosis, report a finished one, and return any effects to set.
+
+        A vessel_changed condition restarts the pooled evidence; a finished diagnosis goes into
+        ``record.diagnosis`` and the ``missing_effect`` warning of the model in force into
+        ``record.conditions``.
+
+        Parameters
+        ----------
+        record : RefitRecord
+            The refit's record (completed in place).
+        identifier : OnlineIdentifier
+            The identifier, for its configuration and its window.
+
+        Returns
+        -------
+        tuple of str or None
+            The effects auto-add sets (added or removed one); None when unchanged.
+        """
         config = identifier.config
         structure = (config.model, tuple(config.effects))
         self._take_structure(structure)
@@ -539,6 +582,7 @@ class OnlineDiagnosis:
         return change
 
     def close(self) -> None:
+        """Stop the runner (the child process of a ``DiagnosisWorker``)."""
         self.runner.close()
 
     def _is_due(self, now: float, period: float) -> bool:
@@ -574,12 +618,25 @@ class OnlineDiagnosis:
         self._asked = None
 
     def finish(self, result: dict, config) -> tuple | None:
-        """Take a finished diagnosis ``result`` of the model configured in ``config``: pool its
-        held-out slice, complete it in place (each candidate's ``pooled`` figures and pooled
-        ``significant``, the pooled verdict and its sentence, the ``ros2 param set`` command), keep
-        the ``missing_effect`` warning, run auto-add; return the effects auto-add sets (None:
-        unchanged). A skipped diagnosis, or one of another model than ``config``'s or due before
-        the vessel last changed (it waited or ran meanwhile), changes nothing."""
+        """Take a finished diagnosis: pool its held-out slice, complete it, keep its warning, run auto-add.
+
+        The result is completed in place (each candidate's ``pooled`` figures and pooled
+        ``significant``, the pooled verdict and its sentence, the ``ros2 param set`` command). A skipped
+        diagnosis, or one of another model than ``config``'s or due before the vessel last changed (it
+        waited or ran meanwhile), changes nothing.
+
+        Parameters
+        ----------
+        result : dict
+            The finished diagnosis record.
+        config : OnlineConfig
+            The configuration in force (its model and effects).
+
+        Returns
+        -------
+        tuple of str or None
+            The effects auto-add sets; None when unchanged.
+        """
         piece = result.pop("held_out_slice", None)
         structure = (result["structure"]["model"], tuple(result["structure"]["effects"]))
         current = structure == (config.model, tuple(config.effects)) and result["stamp"] >= self._pool_from

@@ -231,7 +231,22 @@ def _table(headers: list[str], rows: list[list]) -> str:
 
 
 def write_report(d: Diagnosis, directory, source: str = "") -> Path:
-    """Write ``directory/index.html`` and its PNGs; returns the HTML path."""
+    """Write the diagnosis as an HTML report: ``directory/index.html`` and its PNG figures.
+
+    Parameters
+    ----------
+    d : Diagnosis
+        The diagnosis.
+    directory : str or Path
+        Where to write (created if missing).
+    source : str
+        What was diagnosed (file names), shown in the report.
+
+    Returns
+    -------
+    Path
+        The HTML file's path.
+    """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     images = [

@@ -111,16 +111,51 @@ def block_squared_errors(structure: Structure, params: dict, dataset: Dataset, b
 
 
 def block_errors(structure: Structure, params: dict, dataset: Dataset, blocks: tuple, lead: int = 0) -> np.ndarray:
-    """Robust mean square (rad^2/s^2), median(e^2) / 0.455, of the free-run yaw-rate error e in each
-    block, the model run free from the measured state ``lead`` samples before it (``block_squared_errors``)."""
+    """Robust mean square of the free-run yaw-rate error in each block, median(e^2) / 0.455.
+
+    The model runs free from the measured state ``lead`` samples before each block
+    (``block_squared_errors``); for Gaussian errors the statistic is their variance, and spikes do not
+    move it.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model.
+    params : dict
+        Its parameters (SI units).
+    dataset : Dataset
+        The data (rad, rad/s).
+    blocks : tuple of (int, int)
+        Half-open sample-index ranges inside the segments (``cut_segments``).
+    lead : int
+        Samples the free run starts before its block (0: at the block).
+
+    Returns
+    -------
+    numpy.ndarray
+        One mean square per block, (rad/s)^2; NaN or inf where the free run diverges.
+    """
     squared = block_squared_errors(structure, params, dataset, blocks, lead)
     return np.array([np.median(e) / MEDIAN_OF_CHI2_1 for e in squared])
 
 
 class ChangeDetector:
-    """Declares a change when the newest ``length`` s of free-run error, of the newest model
-    fitted before them, exceed ``ratio`` times that model's usual level on CONFIRMATIONS
-    refits in a row (see the module docstring)."""
+    """Has the vessel changed? The newest data's out-of-sample free-run error against the usual level.
+
+    Declares a change when the newest ``length`` s of free-run error, of the newest model fitted
+    before them, exceed ``ratio`` times that model's usual level on CONFIRMATIONS refits in a row, or
+    the newest ``short`` s exceed SHORT_RATIO_FACTOR ``ratio`` times it once (see the module
+    docstring).
+
+    Parameters
+    ----------
+    ratio : float
+        Mean-square ratio (dimensionless) over the usual level that shows a change; 0: never.
+    length : float
+        Length of the tested block of newest data (s), ``change_test_length``.
+    short : float
+        Newest data of the quick test (s), about one refit period.
+    """
 
     def __init__(self, ratio: float, length: float, short: float):
         self.ratio = ratio  # mean-square ratio (dimensionless); 0: never
@@ -133,8 +168,20 @@ class ChangeDetector:
         self.base_errors = {}  # its published standard errors
 
     def calibrate(self, structure: Structure, estimate, dataset: Dataset) -> None:
-        """Learn the usual error level of a just-accepted estimate on its own (full) window; an
-        estimate less well determined than REFERENCE_RELATIVE_ERRORS is not a reference."""
+        """Learn the usual error level of a just-accepted estimate on its own full window.
+
+        An estimate less well determined than REFERENCE_RELATIVE_ERRORS is not a reference (new
+        conditions would surprise a model still learning them).
+
+        Parameters
+        ----------
+        structure : Structure
+            The model.
+        estimate : Estimate
+            The accepted estimate, with its published standard errors (SI units).
+        dataset : Dataset
+            The full window it was fitted on.
+        """
         params, errors = estimate.parameters, estimate.std_errors
         if not all(
             errors.get(name, math.inf) <= limit * abs(params[name])
@@ -153,6 +200,7 @@ class ChangeDetector:
             self.references.append((float(dataset.time[-1]), params, level, dict(estimate.std_errors)))
 
     def forget(self) -> None:
+        """Drop every reference and vote (a new model, a clock jump back: the old levels no longer apply)."""
         self.references.clear()
         self.votes = self.short_votes = 0
         self.base, self.base_errors = None, {}
@@ -187,8 +235,25 @@ class ChangeDetector:
         return float(robust) / reference[2]
 
     def test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
-        """(ratio of the newest block's error to the usual level, time (s) the vessel changed or None).
-        The newest block is out of sample: the model is the newest one fitted before it began."""
+        """The change test of a refit: the newest block's error against the usual level, and where it changed.
+
+        The newest block is out of sample: the model is the newest one fitted before it began.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model.
+        dataset : Dataset
+            The window (rad, rad/s), its newest ``length`` s the tested block.
+
+        Returns
+        -------
+        ratio : float
+            The newest block's robust mean square over the reference's usual level (NaN without a
+            reference or with the test off).
+        changed_at : float or None
+            Time (s) the vessel most likely changed, when a change is declared; None otherwise.
+        """
         if not self.ratio or not dataset.segments:
             return math.nan, None
         short = self._short_ratio(structure, dataset)
@@ -212,9 +277,24 @@ class ChangeDetector:
         return ratio, self._declare(structure, dataset, reference)
 
     def quick_test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
-        """The quick test alone, between refits (the newest ``short`` s above SHORT_RATIO_FACTOR
-        ``ratio`` times the usual level): (its ratio, time (s) the vessel changed or None). The
-        votes of the full test are left as they are: its blocks would barely move between calls."""
+        """The quick test alone, between refits: the newest ``short`` s against SHORT_RATIO_FACTOR ``ratio``.
+
+        The votes of the full test are left as they are: its blocks would barely move between calls.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model.
+        dataset : Dataset
+            The newest data (rad, rad/s).
+
+        Returns
+        -------
+        ratio : float
+            The newest ``short`` s' robust mean square over the usual level (NaN with the test off).
+        changed_at : float or None
+            Time (s) the vessel most likely changed, when the ratio shows a change; None otherwise.
+        """
         if not self.ratio:
             return math.nan, None
         short = self._short_ratio(structure, dataset)
@@ -247,28 +327,75 @@ def gain_shifted(structure: Structure, params: dict, dataset: Dataset) -> bool:
 def fit_gain(
     structure: Structure, params: dict, dataset: Dataset, blocks: tuple, names=("K",), iterations: int = 8
 ) -> tuple[dict, dict]:
-    """The parameters ``names`` (those the structure has; by default the gain K, 1/s) fitted by
+    """The gain (and any of ``names``) refitted on free runs from each block's start, the rest held.
+
+    The parameters ``names`` (those the structure has; by default the gain K, 1/s) are fitted by
     Gauss-Newton to the yaw rate and heading of ``dataset``, each over its noise std, run free from
-    the start of each of ``blocks``, with every other parameter held at ``params``; returns the
-    parameters and the standard errors of the fitted ones (residual variance, autocorrelation
-    allowed for). Each block starts from an initial heading (rad), yaw rate (rad/s) and, for
-    nomoto2, yaw acceleration (rad/s^2) fitted with them (from the measured heading and yaw rate and
-    zero): new data often begin mid-manoeuvre, the hull turning ever faster after a rudder step, and
-    a free run started steady from a noisy yaw rate would bend the gain to that transient (K 16 %
-    low on the first 12 s of a turn after a zigzag, 4 % with the start fitted). The heading, the
-    integral of the yaw rate with a tenth of its noise per sample (0.1 deg against 0.2 deg/s),
-    determines K sooner after a rudder step (bench peers --quick, random: K and T1 to 8 % 3.2 s
-    after the step, to 11 % on the yaw rate alone)."""
+    the start of each of ``blocks``, with every other parameter held at ``params``. Each block starts
+    from an initial heading (rad), yaw rate (rad/s) and, for nomoto2, yaw acceleration (rad/s^2)
+    fitted with them (from the measured heading and yaw rate and zero): new data often begin
+    mid-manoeuvre, the hull turning ever faster after a rudder step, and a free run started steady
+    from a noisy yaw rate would bend the gain to that transient (K 16 % low on the first 12 s of a
+    turn after a zigzag, 4 % with the start fitted). The heading, the integral of the yaw rate with a
+    tenth of its noise per sample (0.1 deg against 0.2 deg/s), determines K sooner after a rudder
+    step (``bench peers --quick``, random: K and T1 to 8 % 3.2 s after the step, to 11 % on the yaw
+    rate alone).
+
+    Parameters
+    ----------
+    structure : Structure
+        The model.
+    params : dict
+        The held hull's parameters (SI units), the start of the fitted ones.
+    dataset : Dataset
+        The data since the change (rad, rad/s).
+    blocks : tuple of (int, int)
+        Half-open sample-index ranges, each a free run of its own.
+    names : tuple of str
+        The parameters to fit.
+    iterations : int
+        Gauss-Newton iterations.
+
+    Returns
+    -------
+    parameters : dict
+        ``params`` with the fitted ones replaced (SI units).
+    std_errors : dict
+        Standard errors of the fitted ones (residual variance, autocorrelation allowed for).
+    """
     return fit_gain_and_cost(structure, params, dataset, blocks, names, iterations)[:2]
 
 
 def with_held_errors(
     structure: Structure, params: dict, errors: dict, held_errors: dict, dataset: Dataset, blocks: tuple
 ) -> dict:
-    """``errors`` of the parameters ``fit_gain`` fitted (those in ``errors``) widened by the errors of
-    the ones it held (``held_errors``, standard errors): each held parameter moved by its error
-    (towards the inside of its bounds) and the fitted ones refitted from ``params``; their shifts add
-    in quadrature (the held errors taken as independent)."""
+    """Standard errors of a gain refit widened by the errors of the parameters it held.
+
+    Each held parameter is moved by its standard error (towards the inside of its bounds) and the
+    fitted ones refitted from ``params``; their shifts add in quadrature to ``errors`` (the held
+    errors taken as independent): K refitted with T1 held inherits T1's uncertainty through the
+    free run's shape.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model.
+    params : dict
+        The refit's parameters (SI units).
+    errors : dict
+        Standard errors of the parameters ``fit_gain`` fitted (its keys are those parameters).
+    held_errors : dict
+        Standard errors of the held parameters (the hull before the change).
+    dataset : Dataset
+        The data of the refit.
+    blocks : tuple of (int, int)
+        The refit's blocks.
+
+    Returns
+    -------
+    dict
+        Widened standard errors of the fitted parameters (SI units).
+    """
     names = tuple(errors)
     variances = {n: errors[n] ** 2 for n in names}
     for held in [h for h in structure.free_names if h not in errors and h in params]:

@@ -84,11 +84,36 @@ def parameter(default, description: str, unit="", limits=None, read_only=False, 
 
 
 def spec(cls, name: str) -> Spec:
+    """The ``Spec`` (unit, range, description) of one field of a configuration class.
+
+    Parameters
+    ----------
+    cls : type
+        ``OnlineConfig`` or ``NodeSettings``.
+    name : str
+        The field's name.
+
+    Returns
+    -------
+    Spec
+        Its specification.
+    """
     return next(f.metadata["spec"] for f in fields(cls) if f.name == name)
 
 
 def specs(*classes) -> dict:
-    """{name: (default, Spec)} of the fields of ``classes``, in the order of the parameter file."""
+    """Every field of ``classes`` with its default and specification, in the order of the parameter file.
+
+    Parameters
+    ----------
+    *classes : type
+        Configuration dataclasses (``OnlineConfig``, ``NodeSettings``).
+
+    Returns
+    -------
+    dict
+        {name: (default, Spec)}, grouped as ``config/ship_ident.yaml`` lists them.
+    """
     found = [(f.name, f.default, f.metadata["spec"]) for cls in classes for f in fields(cls)]
     found.sort(key=lambda item: GROUPS.index(item[2].group))
     return {name: (default, s) for name, default, s in found}
@@ -272,7 +297,18 @@ class OnlineConfig:
             raise ConfigError(str(exc)) from None
 
     def validate(self) -> OnlineConfig:
-        """Raise ConfigError naming the first bad value; return self when all are usable."""
+        """Check every value against its range and the values against each other.
+
+        Returns
+        -------
+        OnlineConfig
+            ``self``, when all values are usable.
+
+        Raises
+        ------
+        ConfigError
+            Naming the first bad value, its unit and what it must be.
+        """
         check_fields(self)
         if self.min_window_length > self.window_length:
             raise ConfigError(
@@ -313,6 +349,13 @@ class OnlineConfig:
         return self
 
     def structure(self) -> Structure:
+        """The model the identifier fits: ``model`` (nomoto1, nomoto2, ...) with ``effects``.
+
+        Returns
+        -------
+        Structure
+            Its parameters, bounds and simulation.
+        """
         return Structure(self.model, self.effects)
 
     @property
@@ -321,14 +364,39 @@ class OnlineConfig:
         return self.gap_threshold or GAP_SAMPLES * self.sample_time
 
     def changed(self, **values) -> OnlineConfig:
-        """A validated copy with some values replaced."""
+        """A validated copy with some values replaced.
+
+        Parameters
+        ----------
+        **values
+            Field names and their new values (SI units).
+
+        Returns
+        -------
+        OnlineConfig
+            The new configuration; raises ConfigError when a value is unusable.
+        """
         return replace(self, **values).validate()
 
     @classmethod
     def field_names(cls) -> list[str]:
+        """The names of the configuration's fields, in declaration order.
+
+        Returns
+        -------
+        list of str
+            Field names (node parameters of the same names).
+        """
         return [f.name for f in fields(cls)]
 
     def to_json(self) -> dict:
+        """The configuration as a JSON object.
+
+        Returns
+        -------
+        dict
+            Field name -> value (SI units; ``effects`` a list).
+        """
         out = asdict(self)
         out["effects"] = list(self.effects)
         return out
@@ -365,6 +433,13 @@ class NodeSettings:
     )
 
     def validate(self) -> NodeSettings:
+        """Check every value against its range.
+
+        Returns
+        -------
+        NodeSettings
+            ``self``, when all values are usable; raises ConfigError naming the first bad one.
+        """
         check_fields(self)
         return self
 

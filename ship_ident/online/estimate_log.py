@@ -39,7 +39,18 @@ class EstimateLog:
         self.max_bytes, self.backups = max_bytes, backups
 
     def write(self, record: dict) -> None:
-        """Append one record (strict JSON, NaN as null); raises OSError when the disk refuses."""
+        """Append one record as a line of strict JSON (NaN as null), rotating the file when it is full.
+
+        Parameters
+        ----------
+        record : dict
+            The accepted estimate's record (``RefitRecord.to_json``).
+
+        Raises
+        ------
+        OSError
+            When the disk refuses (full, directory removed).
+        """
         line = (dumps_json(record) + "\n").encode()
         size = self.path.stat().st_size if self.path.exists() else 0
         if size and size + len(line) > self.max_bytes:

@@ -108,20 +108,36 @@ class RefitRecord:
     verdicts: dict = field(default_factory=dict)  # condition -> Verdict: the code and figures of a decision
 
     def report(self, verdict: Verdict) -> None:
-        """Record a decision: its sentence under its condition, the verdict itself in ``verdicts``."""
+        """Record a decision: its sentence under its condition, the verdict itself in ``verdicts``.
+
+        Parameters
+        ----------
+        verdict : Verdict
+            The decision (condition, code, figures).
+        """
         self.conditions[verdict.condition] = verdict.sentence
         self.verdicts[verdict.condition] = verdict
 
     @property
     def level(self) -> int:
+        """The record's severity: the worst of its conditions' (OK 0, WARN 1, ERROR 2)."""
         return max((CONDITION_LEVELS[c] for c in self.conditions), default=OK)
 
     @property
     def status(self) -> str:
+        """The record's severity by name: 'OK', 'WARN' or 'ERROR'."""
         return LEVEL_NAMES[self.level]
 
     def to_json(self) -> dict:
-        """The ``~/estimate`` / ``replay --json`` record: the identify JSON plus online fields."""
+        """The ``~/estimate`` / ``replay --json`` record: the identify JSON plus online fields.
+
+        Returns
+        -------
+        dict
+            Stamp, status, conditions (name -> sentence), the estimate in force (SI units), the windows,
+            the predicted and measured yaw rate at the window end (rad/s), compute time and input counts;
+            the diagnosis that finished at this refit, if any (the ``~/estimate`` message of docs/node.md).
+        """
         estimate = self.estimate or {}
         record = {
             "stamp": self.time,
@@ -153,6 +169,11 @@ class OnlineIdentifier:
     Thread-safe: ``add`` (from message callbacks) and ``refit`` (from a worker)
     may run on different threads; the refit copies the window under a lock and
     fits outside it. Configuration changes take effect at the next refit.
+
+    Parameters
+    ----------
+    config : OnlineConfig
+        The configuration (validated here; ConfigError names a bad value).
     """
 
     def __init__(self, config: OnlineConfig):
@@ -179,10 +200,19 @@ class OnlineIdentifier:
     # --- configuration ---------------------------------------------------
     @property
     def config(self) -> OnlineConfig:
+        """The configuration in force."""
         return self._config
 
     def reconfigure(self, config: OnlineConfig) -> None:
-        """Use a new configuration from the next refit on (window and schedule are kept)."""
+        """Use a new configuration from the next refit on (window and schedule are kept).
+
+        A new model or new effects forget the estimate in force and the change detector's references.
+
+        Parameters
+        ----------
+        config : OnlineConfig
+            The new configuration (validated here).
+        """
         config = config.validate()
         with self._lock:
             if (config.model, config.effects) != (self._config.model, self._config.effects):
@@ -198,7 +228,18 @@ class OnlineIdentifier:
 
     # --- input -----------------------------------------------------------
     def add(self, sample: Sample) -> str:
-        """Store a sample; return ``accepted`` or why it was rejected (also counted)."""
+        """Store a sample, or count why it was rejected.
+
+        Parameters
+        ----------
+        sample : Sample
+            The sample (time s on the clock that feeds the identifier, SI value, NED).
+
+        Returns
+        -------
+        str
+            'accepted', or the rejection ('non_finite', 'absurd', 'duplicate', 'out_of_order').
+        """
         with self._lock:
             outcome = self._check(sample)
             self.counts[outcome] += 1
@@ -247,7 +288,18 @@ class OnlineIdentifier:
 
     # --- schedule --------------------------------------------------------
     def due(self, now: float) -> bool:
-        """Whether a refit is due at clock time ``now`` (s); the schedule starts at the first call."""
+        """Whether a refit is due at clock time ``now``; the schedule starts at the first call.
+
+        Parameters
+        ----------
+        now : float
+            Clock time (s).
+
+        Returns
+        -------
+        bool
+            True when a refit is due (call ``refit(now)``).
+        """
         with self._lock:
             self._observe_clock(now)
             if self._next_due is None:
@@ -255,7 +307,13 @@ class OnlineIdentifier:
             return now >= self._next_due
 
     def skip(self, now: float) -> None:
-        """Move the schedule past ``now`` without refitting (a refit was still running)."""
+        """Move the schedule past ``now`` without refitting (a refit was still running).
+
+        Parameters
+        ----------
+        now : float
+            Clock time (s).
+        """
         with self._lock:
             self._advance_schedule(now)
 
@@ -284,10 +342,22 @@ class OnlineIdentifier:
         return self._change_note is not None and now - self._window_floor < self._config.min_window_length
 
     def watch(self, now: float) -> bool:
-        """Between refits, at most WATCHES_PER_REFIT times per refit period: whether the newest data
-        show a change (the change detector's quick test on the newest 2 ``change_test_length`` s, with
-        an accepted estimate in force and no change being followed). A change found restarts the
-        window where it happened and makes a refit due at once (call ``refit(now)``)."""
+        """Between refits: whether the newest data show a change of the vessel.
+
+        At most WATCHES_PER_REFIT times per refit period, the change detector's quick test on the newest
+        2 ``change_test_length`` s, with an accepted estimate in force and no change being followed. A
+        change found restarts the window where it happened and makes a refit due at once.
+
+        Parameters
+        ----------
+        now : float
+            Clock time (s).
+
+        Returns
+        -------
+        bool
+            True when a change was found (call ``refit(now)``).
+        """
         with self._lock:
             config = self._config
             if not (
@@ -313,7 +383,19 @@ class OnlineIdentifier:
 
     # --- refit -----------------------------------------------------------
     def refit(self, now: float) -> RefitRecord:
-        """Fit the window as it is at clock time ``now`` (s) and advance the schedule."""
+        """Fit the window as it is at clock time ``now`` and advance the schedule.
+
+        Parameters
+        ----------
+        now : float
+            Clock time (s).
+
+        Returns
+        -------
+        RefitRecord
+            The estimate in force (new, or the last good one), the window, the conditions found and
+            the verdicts behind them.
+        """
         started = wallclock.perf_counter()
         with self._lock:
             self._advance_schedule(now)
@@ -347,8 +429,23 @@ class OnlineIdentifier:
         return record
 
     def window_dataset(self, now: float) -> Dataset:
-        """The window at clock time ``now`` (s) resampled as a refit resamples it (after the last
-        change, if any); raises DataError when it cannot be resampled."""
+        """The window at clock time ``now`` resampled as a refit resamples it (after the last change, if any).
+
+        Parameters
+        ----------
+        now : float
+            Clock time (s).
+
+        Returns
+        -------
+        Dataset
+            The window on the ``sample_time`` grid, split at gaps.
+
+        Raises
+        ------
+        DataError
+            When it cannot be resampled.
+        """
         with self._lock:
             config = self._config
             oldest = max(now - config.window_length, self._window_floor)
@@ -556,8 +653,21 @@ def run_schedule(identifier: OnlineIdentifier, samples, diagnosis=None):
     This is the node's loop with the bag's time for the node's clock: a refit
     due at a sample's time, or one a change found between refits calls for
     (``watch``), runs on everything that arrived before it.
-    ``diagnosis`` (an ``diagnosis.onboard.OnlineDiagnosis``) runs on the window after each refit
-    when due; an effect it adds or removes by itself takes effect from the next refit.
+    An effect the diagnosis adds or removes by itself takes effect from the next refit.
+
+    Parameters
+    ----------
+    identifier : OnlineIdentifier
+        The identifier to feed.
+    samples : iterable of Sample
+        Samples in time order (time s, SI values).
+    diagnosis : diagnosis.onboard.OnlineDiagnosis or None
+        The diagnosis on board, run on the window after each refit when due.
+
+    Yields
+    ------
+    RefitRecord
+        Each refit's record, in time order.
     """
     for sample in samples:
         if identifier.due(sample.time) or identifier.watch(sample.time):

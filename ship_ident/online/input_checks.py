@@ -39,8 +39,27 @@ SATURATION_TOLERANCE = math.radians(1.0)  # rad
 
 
 def value_rejection(sample: Sample) -> str:
-    """'non_finite' or 'absurd' for a value (or stamp) no sensor reports, '' for a usable one;
-    ValueError for a role that is not one of ROLES."""
+    """Why a sample's value cannot be used: 'non_finite' or 'absurd', or '' for a usable one.
+
+    A value (or stamp) no sensor reports: NaN or inf, or beyond ABSURD_LIMITS (|rudder| > 90 deg,
+    |heading| > 1000 rad,
+    |yaw rate| > 172 deg/s, |speed| > 50 m/s).
+
+    Parameters
+    ----------
+    sample : Sample
+        The sample (time s, SI value).
+
+    Returns
+    -------
+    str
+        'non_finite', 'absurd' or ''.
+
+    Raises
+    ------
+    ValueError
+        For a role that is not one of ROLES.
+    """
     if sample.role not in ROLES:
         raise ValueError(f"unknown role {sample.role!r}; use one of {', '.join(ROLES)}")
     if not (math.isfinite(sample.time) and math.isfinite(sample.value)):
@@ -51,7 +70,20 @@ def value_rejection(sample: Sample) -> str:
 
 
 def order_rejection(time: float, newest: float) -> str:
-    """'duplicate' or 'out_of_order' for a stamp (s) at or before the input's newest, else ''."""
+    """'duplicate' or 'out_of_order' for a stamp at or before the input's newest, else ''.
+
+    Parameters
+    ----------
+    time : float
+        The sample's stamp (s).
+    newest : float
+        The input's newest accepted stamp (s).
+
+    Returns
+    -------
+    str
+        'duplicate', 'out_of_order' or ''.
+    """
     if time == newest:
         return "duplicate"
     if time < newest:
@@ -62,8 +94,31 @@ def order_rejection(time: float, newest: float) -> str:
 def input_conditions(
     config: OnlineConfig, series: dict, newest: dict, now: float, fresh: dict, last_jump: float
 ) -> dict:
-    """What the window's inputs say before any fit: no data, still filling, stale inputs, samples
-    rejected since the last refit (``fresh``: counts since then), a clock jump (``last_jump``, s)."""
+    """What the window's inputs say before any fit.
+
+    No data, still filling (less than ``min_window_length``), stale inputs (no sample for
+    ``stale_timeout``), samples rejected since the last refit, a clock jump.
+
+    Parameters
+    ----------
+    config : OnlineConfig
+        The identifier's configuration.
+    series : dict
+        Role -> (n, 2) array of the window's accepted (time s, value) samples (rad, rad/s, m/s).
+    newest : dict
+        Role -> newest accepted stamp (s).
+    now : float
+        Clock time of the refit (s).
+    fresh : dict
+        Input counts by outcome since the last refit.
+    last_jump : float
+        The clock's last jump (s; negative backwards).
+
+    Returns
+    -------
+    dict
+        Condition name -> sentence.
+    """
     conditions = {}
     roles = list(REQUIRED_ROLES) + (["speed"] if config.speed_topic else [])
     empty = [r for r in roles if len(series[r]) < 2]
@@ -99,7 +154,24 @@ def input_conditions(
 
 
 def window_truncation(config: OnlineConfig, series: dict, full: list, now: float) -> dict:
-    """The sample bound cut an input's window short of ``window_length``."""
+    """The sample bound ``max_window_samples`` cut an input's window short of ``window_length``.
+
+    Parameters
+    ----------
+    config : OnlineConfig
+        The identifier's configuration.
+    series : dict
+        Role -> (n, 2) array of the window's accepted (time s, value) samples (rad, rad/s, m/s).
+    full : list of str
+        The roles whose window holds ``max_window_samples``.
+    now : float
+        Clock time of the refit (s).
+
+    Returns
+    -------
+    dict
+        {'window_truncated': sentence} naming the inputs and how much they hold, or {}.
+    """
     short = [
         f"{role} ({now - series[role][0, 0]:.0f} s)"
         for role in full
@@ -125,6 +197,16 @@ def heading_plausibility(series: dict) -> dict:
     and NED on both, 57.3 for a heading in degrees, -1 for a yaw rate of the
     other sign (ENU, counter-clockwise positive). Heading steps of about 360
     (wraps in degrees) also give degrees away when the boat hardly turns.
+
+    Parameters
+    ----------
+    series : dict
+        Role -> (n, 2) array of the window's accepted (time s, value) samples (rad, rad/s, m/s).
+
+    Returns
+    -------
+    dict
+        {'heading_in_degrees': sentence} or {'yaw_rate_sign': sentence}, or {}.
     """
     heading, yaw_rate = series["heading"], series["yaw_rate"]
     if len(heading) < 10 or len(yaw_rate) < 10:
@@ -175,8 +257,22 @@ def integral_at(time: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndar
 
 
 def rudder_saturation(rudder: np.ndarray, limit: float) -> dict:
-    """The rudder held at the steering gear's limit (rad) for most of the window: saturated (or
-    stuck there). A zigzag or a turn holding a smaller angle is not saturation."""
+    """The rudder held at the steering gear's limit for most of the window: saturated, or stuck there.
+
+    A zigzag or a turn holding a smaller angle is not saturation.
+
+    Parameters
+    ----------
+    rudder : numpy.ndarray
+        The window's rudder angles (rad).
+    limit : float
+        The steering gear's limit (rad), ``rudder_limit``.
+
+    Returns
+    -------
+    dict
+        {'rudder_saturated': sentence with the angle and its share of the window}, or {}.
+    """
     for extreme in (np.percentile(rudder, 99.5), np.percentile(rudder, 0.5)):
         share = float(np.mean(np.abs(rudder - extreme) <= SATURATION_TOLERANCE))
         if abs(extreme) >= limit - SATURATION_TOLERANCE and share >= SATURATION_SHARE:

@@ -31,9 +31,21 @@ PREDICTION_FRAME = "base_link_frd"
 
 
 def trusted_parameters(record: RefitRecord) -> tuple[list[str], list[float]] | None:
-    """(names, values) of the estimate an autopilot may steer by: the record's status is OK and
-    every value finite; None otherwise. The names are the estimate's own, in its order (they follow
-    the model and its effects: read them, never positions)."""
+    """The estimate an autopilot may steer by: the record's status is OK and every value finite.
+
+    The names are the estimate's own, in its order (they follow the model and its effects: read them,
+    never positions).
+
+    Parameters
+    ----------
+    record : RefitRecord
+        The refit's record.
+
+    Returns
+    -------
+    tuple of (list of str, list of float) or None
+        (names, values, SI units) of the estimate in force; None when it is not trusted.
+    """
     parameters = (record.estimate or {}).get("parameters") or {}
     if record.status != "OK" or not parameters or not all(math.isfinite(v) for v in parameters.values()):
         return None
@@ -41,8 +53,20 @@ def trusted_parameters(record: RefitRecord) -> tuple[list[str], list[float]] | N
 
 
 def gain_band(record: RefitRecord) -> list[float] | None:
-    """[K - 1.96 s, K, K + 1.96 s] (1/s) of the estimate in force, whatever its status (its
-    standard error s as published: a loose estimate shows a wide band); None without a finite K."""
+    """The gain's 95 % band [K - 1.96 s, K, K + 1.96 s] (1/s) of the estimate in force, whatever its status.
+
+    Its standard error s as published: a loose estimate shows a wide band.
+
+    Parameters
+    ----------
+    record : RefitRecord
+        The refit's record.
+
+    Returns
+    -------
+    list of float or None
+        The band's lower end, K and upper end (1/s); None without a finite K and error.
+    """
     estimate = record.estimate or {}
     gain = estimate.get("parameters", {}).get("K", math.nan)
     error = estimate.get("std_errors", {}).get("K", math.nan)
@@ -52,9 +76,27 @@ def gain_band(record: RefitRecord) -> list[float] | None:
 
 
 def diagnostic_status(record: RefitRecord, extra: dict | None = None) -> tuple[int, str, list[tuple[str, str]]]:
-    """(level 0/1/2, message, [(key, value)]) of the ``/diagnostics`` status of a refit: the
-    conditions (most severe first, ``condition/NAME``), the input counts, ``extra`` values, the
-    parameters and the free-run fit of the estimate in force, the refit's compute time."""
+    """The ``/diagnostics`` status of a refit: level, message and key-values.
+
+    The conditions (most severe first, ``condition/NAME``), the input counts, ``extra`` values, the
+    parameters and the free-run fit of the estimate in force, the refit's compute time.
+
+    Parameters
+    ----------
+    record : RefitRecord
+        The refit's record.
+    extra : dict or None
+        More key-values to show (the node's own: its callback error count).
+
+    Returns
+    -------
+    level : int
+        0 OK, 1 WARN, 2 ERROR.
+    message : str
+        The conditions' sentences, or 'estimating'.
+    values : list of (str, str)
+        Key-values.
+    """
     conditions = record.conditions
     ordered = sorted(conditions, key=lambda c: -CONDITION_LEVELS.get(c, 2))
     message = "; ".join(f"{c.replace('_', ' ')}: {conditions[c]}" for c in ordered) or "estimating"
@@ -70,7 +112,18 @@ def diagnostic_status(record: RefitRecord, extra: dict | None = None) -> tuple[i
 
 
 def error_and_floor(diagnosis: dict | None) -> tuple[float, float] | None:
-    """(held-out free-run yaw-rate error, its noise floor) in rad/s of a finished diagnosis, else None."""
+    """The held-out free-run yaw-rate error of a finished diagnosis and its noise floor.
+
+    Parameters
+    ----------
+    diagnosis : dict or None
+        The diagnosis on board's record (``diagnosis.onboard``).
+
+    Returns
+    -------
+    tuple of float or None
+        (error, floor) in rad/s; None unless the diagnosis is done.
+    """
     if diagnosis is None or diagnosis.get("status") != "done":
         return None
     return float(diagnosis["held_out_error"]), float(diagnosis["noise_floor"])
@@ -91,6 +144,11 @@ class YawRatePrediction:
     end of a bag). The error grows along each run where the model misses the vessel, and every run
     starts again from the measurement, so the plot shows where the model fails, not a one-step
     echo. Thread-safe (samples from message callbacks, estimates from the refit worker).
+
+    Parameters
+    ----------
+    config : OnlineConfig
+        The configuration in force (``prediction_horizon`` and ``sample_time`` in s, gap, speed topic).
     """
 
     def __init__(self, config: OnlineConfig):
@@ -103,8 +161,16 @@ class YawRatePrediction:
         self._last = dict.fromkeys(ROLES)  # the newest (time, value) of each role before the run
 
     def update(self, record: RefitRecord, config: OnlineConfig) -> None:
-        """The refit's estimate in force (kept when it has none) and the configuration in force
-        (``prediction_horizon``, ``sample_time``, gap and speed topic), both from the next run on."""
+        """Take the refit's estimate in force and the configuration in force, both from the next run on.
+
+        Parameters
+        ----------
+        record : RefitRecord
+            The refit's record.
+            Its estimate is kept when it has none.
+        config : OnlineConfig
+            The configuration in force (``prediction_horizon``, ``sample_time``, gap and speed topic).
+        """
         estimate = record.estimate
         with self._lock:
             self._config = config
@@ -116,8 +182,20 @@ class YawRatePrediction:
                 self._estimate = (structure, dict(estimate["parameters"]))
 
     def add(self, sample: Sample) -> list[tuple[float, float]]:
-        """Take one input sample; the (time, predicted yaw rate) pairs of the run it ends, if it ends
-        one, else []. A value that is not finite, or not newer than its role's last, is left out."""
+        """Take one input sample; return the predictions of the run it ends, if it ends one.
+
+        A value that is not finite, or not newer than its role's last, is left out.
+
+        Parameters
+        ----------
+        sample : Sample
+            The input sample (time s, SI value).
+
+        Returns
+        -------
+        list of (float, float)
+            (time s, predicted yaw rate rad/s) of the finished run, else [].
+        """
         with self._lock:
             finished = self._take(sample)
         return self._predict(*finished) if finished else []
@@ -144,7 +222,13 @@ class YawRatePrediction:
         return finished
 
     def flush(self) -> list[tuple[float, float]]:
-        """The run in progress, predicted on what arrived of it (the end of a bag)."""
+        """The run in progress, predicted on what arrived of it (the end of a bag).
+
+        Returns
+        -------
+        list of (float, float)
+            (time s, predicted yaw rate rad/s); [] without a run in progress.
+        """
         with self._lock:
             if math.isnan(self._run_start):
                 return []

@@ -16,8 +16,11 @@ ROLES = ("rudder", "heading", "yaw_rate", "speed")
 
 @dataclass(frozen=True)
 class Topics:
-    """Input names: bag topics (when ``imu`` is set, heading and yaw rate come from that Imu topic)
-    and, for CSV files, the user's (role, column) pairs ``csv_columns`` (see ``io.parse_columns``)."""
+    """Input names: bag topics, and the column names of CSV files.
+
+    When ``imu`` is set, heading and yaw rate come from that Imu topic; for CSV files the user's
+    (role, column) pairs are ``csv_columns`` (see ``io.parse_columns``).
+    """
 
     rudder: str = "/usv/rudder"
     heading: str = "/usv/heading"

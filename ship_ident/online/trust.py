@@ -113,8 +113,7 @@ class TrustPolicy:
 
     @staticmethod
     def precision(published, last_good, after_change: bool, followed: bool) -> Verdict | None:
-        """Whether a plausible estimate is determined well enough to be trusted (None) or not (an
-        uncertain_estimate verdict).
+        """Whether a plausible estimate is determined well enough to be trusted, or uncertain.
 
         An estimate whose gain or main time constant has a relative error beyond
         TRUSTED_RELATIVE_ERRORS is published with its uncertainty (WARN, code

@@ -69,13 +69,33 @@ class EstimateScatter:
         self.recent = deque(maxlen=SCATTER_PAIRS)  # accepted estimates (estimator's errors), oldest first
 
     def add(self, estimate) -> None:
+        """Enter an accepted estimate (with the estimator's own errors) into the recent ones.
+
+        Parameters
+        ----------
+        estimate : Estimate
+            The accepted estimate.
+        """
         self.recent.append(estimate)
 
     def forget(self) -> None:
+        """Drop the recent estimates (a change of the vessel or of the model: they scatter about other values)."""
         self.recent.clear()
 
     def components(self, estimate) -> dict:
-        """{parameter: (phi^2 >= 1, sigma^2 >= 0)} from the recent estimates and this one."""
+        """The drift and own-error components of the scatter of the recent estimates and this one.
+
+        Parameters
+        ----------
+        estimate : Estimate
+            The new estimate (the estimator's own errors, its window and influence).
+
+        Returns
+        -------
+        dict
+            {parameter: (phi^2 >= 1, sigma^2 >= 0)}: the drift's variance factor (dimensionless) and
+            each fit's own error variance (the parameter's unit squared).
+        """
         chain_ = list(self.recent) + [estimate]
         pairs = {name: [] for name in estimate.parameters}  # (d^2 / U, 2 / U)
         for i, a in enumerate(chain_):
@@ -91,6 +111,18 @@ class EstimateScatter:
         return {name: _drift_and_own_error(rows) for name, rows in pairs.items()}
 
     def honest(self, estimate) -> dict:
+        """Standard errors that cover the scatter of the recent estimates: sqrt(phi^2 s^2 + sigma^2).
+
+        Parameters
+        ----------
+        estimate : Estimate
+            The new estimate, with the estimator's own standard errors s.
+
+        Returns
+        -------
+        dict
+            Published standard errors by parameter (SI units), at least the estimator's.
+        """
         components = self.components(estimate)
         honest = {}
         for name, std in estimate.std_errors.items():
@@ -114,15 +146,36 @@ def _shared_shares(a, b) -> tuple[dict, float]:
 
 
 def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset) -> dict:
-    """Standard errors with T1's at least its slide along the T2 = T3 valley when the window cannot
-    tell the second pole T2 from zero (its 95 % interval reaches it): the response it sees is nearly
-    first order, and T1 may move with T2 and T3 further than the error at the search's end says.
-    The slide is read off the cost's profile over T2 (``valley_slide``). With T2 undetermined the
-    local errors describe no distribution: a single held point at T2's 95 % end misses truths far
-    beyond it, so the profile climbs through several. An estimator that cannot hold a parameter (a
-    regression without output error) gives T1 the joint error sqrt(s_T1^2 + s_T2^2 + s_T3^2) when T2
-    is below FIRST_ORDER_SHARE of T1. A rudder lead T3 that cannot be told from zero alone is a hull
-    without one (seed 001's: T1 stays determined)."""
+    """Standard errors with T1's at least its slide along the T2 = T3 valley when T2 is told from zero.
+
+    When the window cannot tell the second pole T2 from zero (its 95 % interval reaches it), the
+    response it sees is nearly first order, and T1 may move with T2 and T3 further than the error at
+    the search's end says. The slide is read off the cost's profile over T2 (``valley_slide``). With
+    T2 undetermined the local errors describe no distribution: a single held point at T2's 95 % end
+    misses truths far beyond it, so the profile climbs through several. An estimator that cannot hold
+    a parameter (a regression without output error) gives T1 the joint error
+    sqrt(s_T1^2 + s_T2^2 + s_T3^2) when T2 is below FIRST_ORDER_SHARE of T1. A rudder lead T3 that
+    cannot be told from zero alone is a hull without one (the WLSSVM paper's USV, "seed 001": T1 stays
+    determined).
+
+    Parameters
+    ----------
+    estimate : Estimate
+        The window's estimate (second-order Nomoto: T1, T2, T3 in s).
+    std_errors : dict
+        Its standard errors so far (SI units).
+    estimator : Estimator
+        The estimator that fitted it (``fit_held`` profiles the cost).
+    structure : Structure
+        The model.
+    dataset : Dataset
+        The window.
+
+    Returns
+    -------
+    dict
+        Standard errors by parameter (SI units), T1's widened where the valley lets it slide.
+    """
     names = ("T1", "T2", "T3")
     parameters = estimate.parameters
     if not all(n in parameters and n in std_errors for n in names):
@@ -209,8 +262,7 @@ def cubic_damping_slides(estimate, std_errors: dict, estimator, structure, datas
 
 
 def along_the_damping(published, estimator, structure, dataset, start_up: bool) -> dict:
-    """Published standard errors checked along the cubic yaw damping when K's or T1's is close to
-    its trusted limit.
+    """Published standard errors checked along the cubic yaw damping when K's or T1's nears its limit.
 
     An estimate whose gain or main time constant is determined within TRUSTED_RELATIVE_ERRORS, but
     past ALPHA_CHECK_SHARE of that limit (START_UP_ALPHA_CHECK_SHARE before a full window has been

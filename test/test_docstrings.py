@@ -14,13 +14,6 @@ API_PACKAGES = ("model", "estimators", "online", "diagnosis")
 # Modules of the core whose docstrings are still to be completed (each is checked to lack some: take
 # it off when it is done).
 PENDING = (
-    "estimators.base",
-    "estimators.lssvm",
-    "estimators.output_error",
-    "estimators.prediction_error",
-    "estimators.shooting",
-    "estimators.tlssvm",
-    "estimators.weighted",
     "model.dataset",
     "model.effects",
     "model.integrate",

@@ -101,7 +101,18 @@ class Influence:
     cumulative: dict  # parameter -> cumulative share at each sample time (ends at 1)
 
     def shares_within(self, start: float, end: float) -> dict:
-        """{parameter: the share of its variance learnt from the samples within [start, end] s}."""
+        """The share of each parameter's variance learnt from the samples within [start, end].
+
+        Parameters
+        ----------
+        start, end : float
+            The time span (s).
+
+        Returns
+        -------
+        dict
+            {parameter: share in [0, 1]}.
+        """
         a, b = np.searchsorted(self.time, start, "left"), np.searchsorted(self.time, end, "right")
         return {
             name: float((c[b - 1] if b > 0 else 0.0) - (c[a - 1] if a > 0 else 0.0))
@@ -127,12 +138,22 @@ class Estimate:
 
     @property
     def ok(self) -> bool:
+        """Whether the estimate may be used: no low_excitation, diverged or failed flag."""
         return not any(f in self.flags for f in ("low_excitation", "diverged", "failed"))
 
     def published(self) -> tuple[dict, dict]:
-        """The parameters and standard errors a user reads: the fitted ones and, for a fit in the
-        acceleration form, K and the time constants where the hull has them (positive linear
-        damping), by the delta method through the fit's covariance."""
+        """The parameters and standard errors a user reads.
+
+        The fitted ones and, for a fit in the acceleration form, K and the time constants where the hull
+        has them (positive linear damping), by the delta method through the fit's covariance.
+
+        Returns
+        -------
+        parameters : dict
+            Values by name (SI units).
+        std_errors : dict
+            Their standard errors (SI units).
+        """
         values, errors = dict(self.parameters), dict(self.std_errors)
         if self.structure.form == "acceleration":
             nomoto, nomoto_errors = nomoto_view(
@@ -143,10 +164,20 @@ class Estimate:
         return values, errors
 
     def course_stability(self) -> dict | None:
-        """Whether the hull holds a straight course by itself, for a fit in the acceleration form
-        (None otherwise: the Nomoto form's K, T > 0 is course-stable by construction): its linear
-        yaw damping a1 (negative: course-unstable, Norrbin), how many standard errors it lies from
-        zero, and a sentence. Within ``Z_95`` standard errors of zero the data do not decide."""
+        """Whether the hull holds a straight course by itself, for a fit in the acceleration form.
+
+        Its linear yaw damping a1 (negative: course-unstable; Norrbin, "Theory and observations on the use
+        of a mathematical model for ship manoeuvring in deep and confined waters", 1970), how many standard
+        errors it lies from zero, and a sentence. Within ``Z_95`` standard errors of zero the data do not
+        decide.
+
+        Returns
+        -------
+        dict or None
+            {'verdict': 'stable', 'unstable' or 'undetermined', 'linear_damping': a1 (the structure's
+            unit), 'std_error', 'z': a1 in standard errors, 'sentence'}; None for the Nomoto form, whose
+            K, T > 0 is course-stable by construction.
+        """
         if self.structure.form != "acceleration" or "a1" not in self.structure.free_names:
             return None
         a1, error = self.parameters["a1"], self.std_errors.get("a1", math.inf)
@@ -163,6 +194,14 @@ class Estimate:
         return {"verdict": verdict, "linear_damping": a1, "std_error": error, "z": z, "sentence": sentence}
 
     def to_json(self) -> dict:
+        """The estimate as ``ship-ident identify --json`` writes it.
+
+        Returns
+        -------
+        dict
+            Structure, method, published parameters and standard errors (SI units), fit figures, sample
+            count, flags, window (s) and the course stability of an acceleration-form fit.
+        """
         values, errors = self.published()
         stability = self.course_stability()
         return {
@@ -179,6 +218,13 @@ class Estimate:
         }
 
     def dumps(self) -> str:
+        """The estimate as a JSON string (``to_json``; NaN and inf written as JavaScript does).
+
+        Returns
+        -------
+        str
+            One JSON object.
+        """
         return json.dumps(self.to_json(), allow_nan=True)
 
 
@@ -349,7 +395,22 @@ class Estimator:
     uses_starts = False  # True for iterative estimators, which search from the given starts
 
     def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
-        """Fit ``structure`` to ``dataset``; ``starts`` are parameter dicts to search from."""
+        """Fit ``structure`` to ``dataset``, searching also from ``starts``.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model to fit (base model and effects).
+        dataset : Dataset
+            The data: rudder, heading, yaw rate (rad, rad/s) on a uniform grid, split at gaps.
+        starts : tuple of dict
+            Parameter sets (SI units) a search also starts from (the last window's estimate, ...).
+
+        Returns
+        -------
+        Estimate
+            The parameters with their standard errors, fit figures and flags.
+        """
         raise NotImplementedError
 
 
@@ -360,11 +421,44 @@ class RegressionEstimator(Estimator):
         self.differentiation = differentiation
 
     def solve(self, X: np.ndarray, y: np.ndarray, sample_time: float | None = None) -> Solution:
-        """Coefficients w of ``y = X w``; ``sample_time`` (s) between rows, for solvers that hold
-        out blocks of time."""
+        """The coefficients w of the equation-error regression ``y = X w``.
+
+        Parameters
+        ----------
+        X : numpy.ndarray
+            The (n, p) regression matrix: one row per sample, one column per regression coefficient.
+        y : numpy.ndarray
+            The (n,) regression target (the yaw acceleration, rad/s^2, or what the structure regresses).
+        sample_time : float or None
+            Time between rows (s), for solvers that hold out blocks of time.
+
+        Returns
+        -------
+        Solution
+            The coefficients w, their covariance up to the noise variance, and solver facts.
+        """
         raise NotImplementedError
 
     def regression(self, structure: Structure, dataset: Dataset) -> Regression:
+        """The equation-error regression of ``structure`` on ``dataset``: derivatives smoothed, columns built.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model (its regression columns).
+        dataset : Dataset
+            The data (rad, rad/s).
+
+        Returns
+        -------
+        Regression
+            X, y and the column names.
+
+        Raises
+        ------
+        DataError
+            When the usable samples do not outnumber the coefficients.
+        """
         structure.check_data(dataset)
         signals: Signals = compute_signals(dataset, self.differentiation)
         regression = structure.regression(signals)
@@ -376,7 +470,26 @@ class RegressionEstimator(Estimator):
         return regression
 
     def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
-        """The regression's closed-form fit: it has no search, so it ignores ``starts``."""
+        """The regression's closed-form fit: it has no search, so it ignores ``starts``.
+
+        The coefficients map back to physical parameters (``parameters_from_coefficients``); their
+        standard errors come from the solution's covariance by the delta method, the residual variance
+        inflated for its autocorrelation.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model to fit (base model and effects).
+        dataset : Dataset
+            The data: rudder, heading, yaw rate (rad, rad/s) on a uniform grid, split at gaps.
+        starts : tuple of dict
+            Parameter sets (SI units) a search also starts from (the last window's estimate, ...).
+
+        Returns
+        -------
+        Estimate
+            The parameters with their standard errors, fit figures and flags.
+        """
         regression = self.regression(structure, dataset)
         solution = self.solve(regression.X, regression.y, dataset.sample_time)
         params, flags = structure.parameters_from_coefficients(solution.w, regression)

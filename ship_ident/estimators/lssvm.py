@@ -122,6 +122,22 @@ class OLS(RegressionEstimator):
     name = "ols"
 
     def solve(self, X, y, sample_time=None):
+        """Ordinary least squares: w = argmin |y - X w|^2, covariance (X'X)^-1.
+
+        Parameters
+        ----------
+        X : numpy.ndarray
+            The (n, p) regression matrix: one row per sample, one column per regression coefficient.
+        y : numpy.ndarray
+            The (n,) regression target (the yaw acceleration, rad/s^2, or what the structure regresses).
+        sample_time : float or None
+            Time between rows (s), for solvers that hold out blocks of time.
+
+        Returns
+        -------
+        Solution
+            The coefficients w, their covariance up to the noise variance, and solver facts.
+        """
         w, *_ = np.linalg.lstsq(X, y, rcond=None)
         return Solution(w=w, cov=np.linalg.pinv(X.T @ X))
 
@@ -136,6 +152,22 @@ class LSSVM(RegressionEstimator):
         self.gamma = gamma
 
     def solve(self, X, y, sample_time=None):
+        """The LS-SVM with bias (Suykens and Vandewalle 1999), its dual or, for a long window, its primal twin.
+
+        Parameters
+        ----------
+        X : numpy.ndarray
+            The (n, p) regression matrix: one row per sample, one column per regression coefficient.
+        y : numpy.ndarray
+            The (n,) regression target (the yaw acceleration, rad/s^2, or what the structure regresses).
+        sample_time : float or None
+            Time between rows (s), for solvers that hold out blocks of time.
+
+        Returns
+        -------
+        Solution
+            The coefficients w, their covariance up to the noise variance, and solver facts.
+        """
         if len(y) <= DUAL_MAX_SAMPLES:
             w, b, alpha = lssvm_dual_with_bias(X, y, self.gamma)
             solver = "dual"
@@ -159,5 +191,21 @@ class RLSSVM(RegressionEstimator):
         self.gamma = gamma
 
     def solve(self, X, y, sample_time=None):
+        """The bias-free LS-SVM on unit-scaled columns, solved in the primal: a ridge regression with 1/gamma.
+
+        Parameters
+        ----------
+        X : numpy.ndarray
+            The (n, p) regression matrix: one row per sample, one column per regression coefficient.
+        y : numpy.ndarray
+            The (n,) regression target (the yaw acceleration, rad/s^2, or what the structure regresses).
+        sample_time : float or None
+            Time between rows (s), for solvers that hold out blocks of time.
+
+        Returns
+        -------
+        Solution
+            The coefficients w, their covariance up to the noise variance, and solver facts.
+        """
         w, cov = ridge_primal(X, y, self.gamma)
         return Solution(w=w, cov=cov, info={"gamma": self.gamma, "solver": "primal"})

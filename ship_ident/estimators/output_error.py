@@ -302,7 +302,12 @@ class _Search:
 
 
 class OutputError(Estimator):
-    """Refine a starting estimator's result by minimising the free-run error."""
+    """Refine a starting estimator's result by minimising the free-run error (output error).
+
+    A bounded Levenberg-Marquardt search (Levenberg 1944, Marquardt 1963) on multiple shooting
+    intervals (Bock 1983), standard errors by Newey and West (1987) under the residuals'
+    autocorrelation (see the module docstring).
+    """
 
     uses_starts = True
     walk_limited = True  # shooting intervals no longer than the rudder-noise walk (``shooting_length``)
@@ -321,16 +326,34 @@ class OutputError(Estimator):
         self.name = f"{start.name}+oe"
 
     def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
-        """Minimise the free-run error from the start's regression fit, its conservative variant
-        and each of ``starts`` (parameter dicts, e.g. the last window's estimate or the model
-        without its last effect; parameters a start lacks are the regression fit's), going on from
-        whichever simulates closest to the data. Without ``starts``, a model with effects also
-        starts from the regression fit of the bare model with the effects at their neutral values
-        (an effect's regression column can make the regression start course-unstable: KVLCC2 with
-        cubic_yaw, T < 0); given starts take its place (they come from such models already). Without
-        ``starts``, when the regression missed the time scale (MISSED_TIME_SCALE_FLAGS), the search
-        also explores (``_refine``); a given start is a converged estimate of a nearby window, and a
-        sound regression start needs no exploring (the refit stays as quick as it was)."""
+        """Minimise the free-run error from the regression fit, its conservative variant and each of ``starts``.
+
+        The search goes on from whichever start simulates closest to the data; ``starts`` are parameter
+        dicts (the last window's estimate, the model without its last effect; parameters a start lacks
+        are the regression fit's). Without ``starts``, a model with effects also starts from the
+        regression fit of the bare model with the effects at their neutral values (an effect's
+        regression column can make the regression start course-unstable: KVLCC2 with cubic_yaw, T < 0);
+        given starts take its place (they come from such models already). Without ``starts``, when the
+        regression missed the time scale (MISSED_TIME_SCALE_FLAGS), the search also explores
+        (``_refine``); a given start is a converged estimate of a nearby window, and a sound regression
+        start needs no exploring (the refit stays as quick as it was).
+
+        Parameters
+        ----------
+        structure : Structure
+            The model to fit.
+        dataset : Dataset
+            The data: rudder, heading, yaw rate (rad, rad/s) on a uniform grid, split at gaps.
+        starts : tuple of dict
+            Parameter sets (SI units) the search also starts from.
+
+        Returns
+        -------
+        Estimate
+            The parameters (SI units) with Newey-West standard errors, the free-run fit, flags (a
+            parameter on a bound, an unconverged search, the fold T1 = T2) and the search's facts in
+            ``info`` (cost, cost ratio, Gauss-Newton errors, influence).
+        """
         first = self.start.fit(structure, dataset)
         explore = self.explore and not starts and any(f in MISSED_TIME_SCALE_FLAGS for f in first.flags)
         if not starts and structure.effects:
@@ -355,23 +378,59 @@ class OutputError(Estimator):
         held: tuple,
         weighted_at: dict | None = None,
     ) -> Estimate:
-        """Minimise the free-run error from ``start`` (``estimate``'s parameters moved) with the
-        parameters named in ``held`` fixed at their values there: one point of the cost's profile
-        over them (how far the others move when those are set elsewhere). ``weighted_at``: the
-        parameters whose noise model and Huber weights weigh the residuals (default: each start's
-        own), so that the costs (``info['cost']``) of points of one profile compare."""
+        """Minimise the free-run error with the parameters ``held`` fixed: one point of the cost's profile.
+
+        From ``start`` (``estimate``'s parameters moved), with the parameters named in ``held`` fixed at
+        their values there: how far the others move when those are set elsewhere. ``weighted_at``: the
+        parameters whose noise model and Huber weights weigh the residuals (default: each start's own),
+        so that the costs (``info['cost']``) of points of one profile compare.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model to fit.
+        dataset : Dataset
+            The data: rudder, heading, yaw rate (rad, rad/s) on a uniform grid, split at gaps.
+        estimate : Estimate
+            The estimate whose profile is traced.
+        start : dict
+            The parameters moved for this point (SI units), the held ones among them.
+        held : tuple of str
+            The parameters held fixed.
+        weighted_at : dict or None
+            The parameters the residual weighting is computed at (SI units).
+
+        Returns
+        -------
+        Estimate
+            The refit with ``held`` fixed; ``info['cost']`` its cost (-2 log-likelihood, up to a constant).
+        """
         first = replace(estimate, parameters=dict(estimate.parameters, **start))
         return self._refine(structure, dataset, first, (), explore=False, held=held, weighted_at=weighted_at)
 
     def shooting_length(self, dataset: Dataset, params: dict) -> float:
-        """Seconds per shooting interval for a hull near ``params``: ``shooting_s``, or
-        SHOOTING_SPAN slow time constants (``slow_time_constant``) when longer (``explore`` fits; the
-        diagnosis's figures were measured on fixed intervals), but no longer than the rudder-noise walk
-        time s_psi^2 / ((K s_delta)^2 h) (``walk_limited``), where the heading drift the free run
-        accumulates from the rudder's noise reaches the heading noise (30 s on seed 001's hull).
-        Each interval's own initial state costs the information of its first time constants: a
-        ship's K (T1 66 s, prediction error) scattered 1.3 % RMS over noise seeds on 120 s
-        intervals, 8.8 % on 50 s ones, 0.4 % on 200 s ones, at its standard error."""
+        """Seconds per shooting interval for a hull near ``params``.
+
+        ``shooting_s``, or SHOOTING_SPAN slow time constants (``slow_time_constant``) when longer
+        (``explore`` fits; the diagnosis's figures were measured on fixed intervals), but no longer than
+        the rudder-noise walk time s_psi^2 / ((K s_delta)^2 h) (``walk_limited``), where the heading
+        drift the free run accumulates from the rudder's noise reaches the heading noise (30 s on the
+        WLSSVM paper's USV). Each interval's own initial state costs the information of its first time
+        constants: a ship's K (T1 66 s, prediction error) scattered 1.3 % RMS over noise seeds on 120 s
+        intervals, 8.8 % on 50 s ones, 0.4 % on 200 s ones, at its standard error.
+
+        Parameters
+        ----------
+        dataset : Dataset
+            The data (its sample time h, s, and noise levels).
+        params : dict
+            The hull's parameters (SI units).
+
+        Returns
+        -------
+        float
+            The interval length (s).
+        """
         length = self.shooting_s
         if "K" not in params:  # the acceleration form: a course-unstable hull's free run grows as
             return length  # exp(|a1| t), and intervals of several of its times would diverge
@@ -385,14 +444,47 @@ class OutputError(Estimator):
 
     @staticmethod
     def residual_weighting(structure, dataset, params0, s_psi, s_r, intervals):
-        """Map free-run errors to the residual vector (here each scaled by its white-noise level),
-        and the log-determinant of the residual covariance per sample in those units (here 0: it
-        does not depend on the parameters), which with the squared residuals makes -2 log-likelihood."""
+        """Map free-run errors to the residual vector: each scaled by its white-noise level.
+
+        The log-determinant of the residual covariance per sample in those units is 0 here (it does not
+        depend on the parameters); with the squared residuals it makes -2 log-likelihood.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model.
+        dataset : Dataset
+            The data (its rudder noise sets the input-noise model).
+        params0 : dict
+            The parameters the noise model is linearised at (SI units).
+        s_psi, s_r : float
+            White noise levels of the heading (rad) and the yaw rate (rad/s).
+        intervals : list of (int, int)
+            The shooting intervals, half-open sample-index ranges.
+
+        Returns
+        -------
+        weigh : callable
+            (heading errors rad, yaw-rate errors rad/s) -> the residual vector (dimensionless).
+        log_det : float
+            Log-determinant of the residual covariance per sample in those units.
+        """
         return (lambda psi_err, r_err: np.concatenate([psi_err / s_psi, r_err / s_r])), 0.0
 
     @staticmethod
     def bandwidth(intervals) -> int:
-        """Newey-West lag window: residuals of different intervals are nearly independent."""
+        """Newey-West lag window: residuals of different intervals are nearly independent.
+
+        Parameters
+        ----------
+        intervals : list of (int, int)
+            The shooting intervals, half-open sample-index ranges.
+
+        Returns
+        -------
+        int
+            The lag window (samples): the longest interval.
+        """
         return max(b - a for a, b in intervals)
 
     @staticmethod

@@ -43,7 +43,12 @@ from .output_error import OutputError
 
 
 class PredictionError(OutputError):
-    """Refine a starting estimate by the prediction-error criterion (rudder noise as input noise)."""
+    """Refine a starting estimate by the prediction-error criterion (rudder noise as input noise).
+
+    The free-run error whitened by a steady-state Kalman predictor (Kalman 1960) of the rudder
+    noise's walk, the maximum-likelihood criterion of the output-error model with coloured noise
+    (Ljung, "System Identification: Theory for the User", 1999).
+    """
 
     walk_limited = False  # the innovation filter takes in the rudder noise's walk
 
@@ -53,6 +58,32 @@ class PredictionError(OutputError):
 
     @staticmethod
     def residual_weighting(structure, dataset, params0, s_psi, s_r, intervals):
+        """Map free-run errors to their whitened Kalman innovations S^-1/2 e_k, interval by interval.
+
+        The log-determinant of the innovations' covariance S per sample depends on the parameters
+        (through the noise model linearised at ``params0``); with the squared residuals it makes
+        -2 log-likelihood.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model.
+        dataset : Dataset
+            The data (its rudder noise sets the input-noise model).
+        params0 : dict
+            The parameters the noise model is linearised at (SI units).
+        s_psi, s_r : float
+            White noise levels of the heading (rad) and the yaw rate (rad/s).
+        intervals : list of (int, int)
+            The shooting intervals, half-open sample-index ranges.
+
+        Returns
+        -------
+        weigh : callable
+            (heading errors rad, yaw-rate errors rad/s) -> the residual vector (dimensionless).
+        log_det : float
+            Log-determinant of the residual covariance per sample in those units.
+        """
         from .base import fit_substeps
 
         h = dataset.sample_time
@@ -70,4 +101,16 @@ class PredictionError(OutputError):
 
     @staticmethod
     def bandwidth(intervals) -> int:
+        """Newey-West lag window: innovations are white, so a short window only guards against model error.
+
+        Parameters
+        ----------
+        intervals : list of (int, int)
+            The shooting intervals (unused: the window is fixed).
+
+        Returns
+        -------
+        int
+            The lag window (samples): 10.
+        """
         return 10  # innovations are white: a short lag window only guards against model error

@@ -62,31 +62,76 @@ class ShootingProblem:
         return self.n_params + self.n_state * len(self.blocks)
 
     def initial_states(self, yaw_rate_bias: float) -> np.ndarray:
-        """Each block's starting state from the data: its first heading (rad) and yaw rate (rad/s)
-        measured, less the sensor's ``yaw_rate_bias`` (rad/s), and no yaw acceleration; one row per
-        block, ``n_state`` columns."""
+        """Each block's starting state from the data, yaw acceleration zero.
+
+        Its first heading (rad) and yaw rate (rad/s) measured, less the sensor's ``yaw_rate_bias``.
+
+        Parameters
+        ----------
+        yaw_rate_bias : float
+            The yaw-rate sensor's bias (rad/s).
+
+        Returns
+        -------
+        numpy.ndarray
+            One row per block, ``n_state`` columns: heading (rad), yaw rate (rad/s)[, yaw acceleration
+            rad/s^2].
+        """
         d = self.dataset
         return np.array([[d.heading[a], d.yaw_rate[a] - yaw_rate_bias, 0.0][: self.n_state] for a, _ in self.blocks])
 
     def unpack(self, x: np.ndarray) -> tuple[dict, list]:
-        """The parameter set (``fixed`` with the fitted ones of ``x``) and each block's initial state
-        (psi, r, r') of the unknowns ``x``."""
+        """The parameter set and each block's initial state of the unknowns ``x``.
+
+        Parameters
+        ----------
+        x : numpy.ndarray
+            The unknowns: the fitted parameters, then each block's state.
+
+        Returns
+        -------
+        params : dict
+            ``fixed`` with the fitted ones of ``x`` (SI units).
+        states : list of tuple
+            Each block's (heading rad, yaw rate rad/s, yaw acceleration rad/s^2; 0 for first order).
+        """
         params = dict(self.fixed)
         params.update(zip(self.names, x[: self.n_params]))
         states = np.asarray(x[self.n_params :]).reshape(-1, self.n_state)
         return params, [(s[0], s[1], s[2] if self.n_state == 3 else 0.0) for s in states]
 
     def simulate(self, points, substeps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Heading (rad) and measured yaw rate (rad/s) of the blocks' free runs for several unknown
-        vectors (one row each), in one compiled call; ``substeps`` per sample (default: the fastest
-        time constant's)."""
+        """The blocks' free runs for several unknown vectors (one row each), in one compiled call.
+
+        Parameters
+        ----------
+        points : sequence of numpy.ndarray
+            Unknown vectors.
+        substeps : int or None
+            Integration substeps per sample (default: the fastest time constant's).
+
+        Returns
+        -------
+        heading, yaw_rate : numpy.ndarray
+            (len(points), n) heading (rad) and measured yaw rate (rad/s) of the runs.
+        """
         runs = [self.unpack(x) for x in points]
         return self.structure.simulate_runs([q for q, _ in runs], self.shots, [i for _, i in runs], substeps)
 
     @staticmethod
     def steps(x: np.ndarray) -> np.ndarray:
-        """Forward-difference steps of the unknowns ``x``: STEP_SHARE of their magnitude, at least
-        of STEP_FLOOR."""
+        """Forward-difference steps of the unknowns: STEP_SHARE of their magnitude, at least of STEP_FLOOR.
+
+        Parameters
+        ----------
+        x : numpy.ndarray
+            The unknowns.
+
+        Returns
+        -------
+        numpy.ndarray
+            One step per unknown (the unknown's unit).
+        """
         return STEP_SHARE * np.maximum(np.abs(x), STEP_FLOOR)
 
     def difference_points(self, x: np.ndarray, upper: np.ndarray, chosen) -> tuple[list, np.ndarray]:
@@ -124,9 +169,21 @@ class ShootingProblem:
         return points, steps
 
     def columns(self, row_blocks: np.ndarray) -> np.ndarray:
-        """The Jacobian's possibly nonzero columns of each residual row, one row per residual: every
-        parameter, then the state of the row's block ``row_blocks`` (rows outside every block, -1,
-        have no state derivative: their zero values are kept in block 0's columns)."""
+        """The Jacobian's possibly nonzero columns of each residual row: every parameter, then its block's state.
+
+        Rows outside every block (``row_blocks`` -1) have no state derivative: their zero values are kept
+        in block 0's columns.
+
+        Parameters
+        ----------
+        row_blocks : numpy.ndarray
+            The block of each residual row (-1: none).
+
+        Returns
+        -------
+        numpy.ndarray
+            (rows, n_params + n_state) column indices (int64).
+        """
         p, n = self.n_params, self.n_state
         out = np.empty((len(row_blocks), p + n), dtype=np.int64)
         out[:, :p] = np.arange(p)

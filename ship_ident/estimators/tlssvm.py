@@ -64,6 +64,25 @@ class TLSSVM(RegressionEstimator):
         self.rule = rule
 
     def solve(self, X, y, sample_time=None):
+        """The truncated LS-SVM (Xu and Guedes Soares 2023): SVD of the scaled regression, small values dropped.
+
+        The number of singular values kept is chosen by ``rule`` (generalised cross-validation or the
+        L-curve, ``truncation_level``).
+
+        Parameters
+        ----------
+        X : numpy.ndarray
+            The (n, p) regression matrix: one row per sample, one column per regression coefficient.
+        y : numpy.ndarray
+            The (n,) regression target (the yaw acceleration, rad/s^2, or what the structure regresses).
+        sample_time : float or None
+            Time between rows (s), for solvers that hold out blocks of time.
+
+        Returns
+        -------
+        Solution
+            The coefficients w, their covariance up to the noise variance, and solver facts.
+        """
         scale = column_scales(X)
         U, s, Vt = np.linalg.svd(X / scale, full_matrices=False)
         beta = U.T @ y

@@ -149,7 +149,24 @@ class RWLSSVM(RegressionEstimator):
         self.particles, self.iterations, self.seed, self.block_s = particles, iterations, seed, block_s
 
     def solve(self, X, y, sample_time=None):
-        """``sample_time`` (s) between rows sets the held-out blocks of ``block_s``; required."""
+        """The weighted LS-SVM whose weights and gamma the adaptive PSO tunes on held-out blocks of time.
+
+        ``sample_time`` between rows sets the held-out blocks of ``block_s``; it is required.
+
+        Parameters
+        ----------
+        X : numpy.ndarray
+            The (n, p) regression matrix: one row per sample, one column per regression coefficient.
+        y : numpy.ndarray
+            The (n,) regression target (the yaw acceleration, rad/s^2, or what the structure regresses).
+        sample_time : float or None
+            Time between rows (s), for solvers that hold out blocks of time.
+
+        Returns
+        -------
+        Solution
+            The coefficients w, their covariance up to the noise variance, and solver facts.
+        """
         if sample_time is None:
             raise ValueError("rwlssvm holds out blocks of time: solve needs the sample time of the rows")
         held_out = held_out_blocks(len(y), int(round(self.block_s / sample_time)))

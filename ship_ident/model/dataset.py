@@ -101,11 +101,24 @@ class Dataset:
 
     @property
     def n_samples(self) -> int:
+        """The number of samples."""
         return len(self.time)
 
     def noise_std(self, name: str, floor: float = SENSOR_RESOLUTION) -> float:
-        """White-noise std of the measured ``name`` (``rudder`` or ``heading`` in rad, ``yaw_rate``
-        in rad/s), at least ``floor``; estimated once per dataset (``noise.noise_level``)."""
+        """White-noise std of a measured signal, at least ``floor``; estimated once per dataset.
+
+        Parameters
+        ----------
+        name : str
+            ``rudder`` or ``heading`` (rad), or ``yaw_rate`` (rad/s).
+        floor : float
+            The smallest value returned (the sensor's resolution, in the signal's unit).
+
+        Returns
+        -------
+        float
+            The std (``noise.noise_level``) in the signal's unit.
+        """
         levels = self._noise_levels
         if name not in levels:
             levels[name] = noise_level(getattr(self, name), 0.0)
@@ -130,11 +143,22 @@ class Dataset:
 
     @property
     def duration(self) -> float:
+        """The time from the first sample to the last (s), gaps included."""
         return float(self.time[-1] - self.time[0]) if self.n_samples else 0.0
 
     def slice(self, start: int, stop: int) -> Dataset:
-        """The samples ``[start, stop)`` as a new Dataset, segments and the recordings' sample
-        ranges (``meta["recordings"]``) clipped."""
+        """The samples ``[start, stop)`` as a new Dataset, segments and recordings' sample ranges clipped.
+
+        Parameters
+        ----------
+        start, stop : int
+            Sample indices, half-open.
+
+        Returns
+        -------
+        Dataset
+            The slice (``meta["recordings"]`` clipped to it).
+        """
         segs = tuple(
             (max(a, start) - start, min(b, stop) - start) for a, b in self.segments if min(b, stop) > max(a, start)
         )
@@ -161,7 +185,18 @@ class Dataset:
         )
 
     def segment_datasets(self, min_samples: int = 2) -> list[Dataset]:
-        """Each contiguous segment as its own Dataset."""
+        """Each contiguous segment as its own Dataset.
+
+        Parameters
+        ----------
+        min_samples : int
+            Segments shorter than this are left out.
+
+        Returns
+        -------
+        list of Dataset
+            The segments, in time order.
+        """
         return [self.slice(a, b) for a, b in self.segments if b - a >= min_samples]
 
     def check_finite(self) -> None:

@@ -231,52 +231,170 @@ class Effect:
 
     # --- simulation hooks -------------------------------------------------
     def effective_rudder(self, time: np.ndarray, rudder: np.ndarray, p: dict) -> np.ndarray:
-        """Rudder angle (rad) that acts on the hull, given the measured one."""
+        """Rudder angle that acts on the hull, given the measured one (a dead band, an offset, a delay).
+
+        Parameters
+        ----------
+        time : numpy.ndarray
+            Sample times (s).
+        rudder : numpy.ndarray
+            The measured rudder angle (rad).
+        p : dict
+            The model's parameters (SI units), this effect's among them.
+
+        Returns
+        -------
+        numpy.ndarray
+            The effective rudder angle (rad), per sample.
+        """
         return rudder
 
     def forcing_terms(self, p: dict) -> list[ForcingTerm]:
-        """State-dependent yaw forcing terms (rad/s) added to the right-hand side."""
+        """State-dependent yaw forcing terms added to the right-hand side of the yaw equation.
+
+        Parameters
+        ----------
+        p : dict
+            The model's parameters (SI units), this effect's among them.
+
+        Returns
+        -------
+        list of ForcingTerm
+            Additive terms of the yaw-rate equation (rad/s per time constant); none by default.
+        """
         return []
 
     def speed_scales(self, speed: np.ndarray, p: dict) -> tuple[np.ndarray, np.ndarray] | None:
-        """Per-sample multipliers of the gain K and of the time constants, or None."""
+        """Per-sample multipliers of the gain K and of the time constants, for an effect of the speed.
+
+        The non-dimensional Nomoto model keeps K L / U and T U / L (L the hull's length) whatever the
+        speed U: the gain grows as U and the time constants shrink as 1 / U.
+
+        Parameters
+        ----------
+        speed : numpy.ndarray
+            Measured speed through the water (m/s), per sample.
+        p : dict
+            The model's parameters (SI units), this effect's among them.
+
+        Returns
+        -------
+        tuple of numpy.ndarray or None
+            (gain multiplier, time-constant multiplier) per sample (dimensionless); None for an effect
+            that does not scale with speed.
+        """
         return None
 
     def measured_yaw_rate(self, yaw_rate: np.ndarray, p: dict) -> np.ndarray:
-        """What the yaw-rate sensor reads (rad/s) when the hull turns at ``yaw_rate``."""
+        """What the yaw-rate sensor reads when the hull turns at ``yaw_rate`` (a bias, a scale error).
+
+        Parameters
+        ----------
+        yaw_rate : numpy.ndarray
+            The hull's true yaw rate (rad/s).
+        p : dict
+            The model's parameters (SI units), this effect's among them.
+
+        Returns
+        -------
+        numpy.ndarray
+            The sensor's reading (rad/s).
+        """
         return yaw_rate
 
     # --- regression hooks -------------------------------------------------
     def prepare(self, signals) -> dict:
-        """Parameters fixed before the regression (e.g. a reference speed); may adjust ``signals``."""
+        """Parameters fixed before the regression (e.g. a reference speed); may adjust ``signals``.
+
+        Parameters
+        ----------
+        signals : Signals
+            The regression's signals (rudder rad, heading rad, yaw rate rad/s and its derivatives).
+
+        Returns
+        -------
+        dict
+            Fixed parameter values (SI units); none by default.
+        """
         return {}
 
     def regressors(self, signals) -> dict[str, np.ndarray]:
-        """Extra regressor columns (name -> values) of the equation ``r = X w``."""
+        """Extra regressor columns of the equation-error regression ``r = X w``.
+
+        Parameters
+        ----------
+        signals : Signals
+            The regression's signals.
+
+        Returns
+        -------
+        dict
+            Column name -> values, one per sample.
+        """
         return {}
 
     def from_coefficients(self, coefficients: dict, base: dict) -> dict:
-        """This effect's parameters from its regression coefficients and the base model's."""
+        """This effect's parameters from its regression coefficients and the base model's (closed form).
+
+        Parameters
+        ----------
+        coefficients : dict
+            Regression coefficients by column name.
+        base : dict
+            The base model's parameters mapped back (K 1/s, time constants s).
+
+        Returns
+        -------
+        dict
+            This effect's parameters (SI units); their initial values by default.
+        """
         return {p.name: p.initial for p in self.parameters}
 
     def neutral(self) -> dict:
-        """Values of the free parameters at which the effect does nothing: the model without it,
-        where a fit with the effect can start (every effect here vanishes at zero)."""
+        """Values of the free parameters at which the effect does nothing.
+
+        The model without it, where a fit with the effect can start (every effect here vanishes at zero).
+
+        Returns
+        -------
+        dict
+            Parameter -> neutral value (SI units).
+        """
         return {p.name: 0.0 for p in self.parameters if p.name not in getattr(self, "fixed", ())}
 
     def starts(self, context: StartContext) -> list[dict]:
-        """Extra starting points (full parameter sets) for a fit with this effect, for parameters
-        that enter non-smoothly or have several minima: a local search from the model without
-        the effect would stay in the nearest minimum."""
+        """Extra starting points for a fit with this effect, for parameters with several minima.
+
+        For parameters that enter non-smoothly or have several minima: a local search from the model
+        without the effect would stay in the nearest minimum.
+
+        Parameters
+        ----------
+        context : StartContext
+            The training data, the nested model's parameters and its cheap refit.
+
+        Returns
+        -------
+        list of dict
+            Full parameter sets (SI units); none by default.
+        """
         return []
 
     # --- diagnosis --------------------------------------------------------
     def evidence(self, context) -> Evidence:
-        """Signature of this effect in the free-run residual (see diagnose.ResidualContext)."""
-        return Evidence(0.0, f"no evidence test for {self.name}")
+        """Signature of this effect in the free-run residual (see ``diagnose.ResidualContext``).
 
-    def describe(self) -> str:
-        return f"{self.name}: {self.explanation}"
+        Parameters
+        ----------
+        context : ResidualContext
+            The base model's free-run residual and the signals it is tested against.
+
+        Returns
+        -------
+        Evidence
+            A score (larger: stronger) and a sentence; no evidence test by default.
+        """
+        return Evidence(0.0, f"no evidence test for {self.name}")
 
 
 class RudderOffset(Effect):

@@ -58,7 +58,37 @@ def _rhs(order, psi, r, z, d, K, T1, T2, T3, coef, r_power, abs_power, harmonic,
 
 @njit(cache=True)
 def advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, coef, r_power, abs_power, harmonic, trig, substeps):
-    """Advance the state (psi, r, z) over one sample of length h, rudder linear from d0 to d1."""
+    """Advance the state (psi, r, z) over one sample of length h with RK4, the rudder linear from d0 to d1.
+
+    The second-order Nomoto model T1 T2 r'' + (T1 + T2) r' + r = K (d + T3 d') plus the forcing terms
+    (Nomoto, Taguchi, Honda and Hirano 1957), in the state z = T1 T2 r' + (T1 + T2) r - K T3 d
+    (``initial_z``), so that the rudder's rate never appears.
+
+    Parameters
+    ----------
+    order : int
+        1 (nomoto1: T r' + r = K d, T = T1) or 2 (nomoto2).
+    h : float
+        Sample time (s).
+    d0, d1 : float
+        Effective rudder angle at the sample's start and end (rad).
+    K, T1, T2, T3 : float
+        Gain (1/s) and time constants (s).
+    psi, r, z : float
+        Heading (rad), yaw rate (rad/s) and auxiliary state z (rad) at the sample's start.
+    coef : numpy.ndarray
+        Forcing coefficients (rad/s per term).
+    r_power, abs_power, harmonic, trig : numpy.ndarray
+        Each forcing term's powers of r and |r|, heading harmonic and trigonometric function
+        (``effects.ForcingTerm``).
+    substeps : int
+        RK4 steps per sample.
+
+    Returns
+    -------
+    psi, r, z : float
+        The state at the sample's end.
+    """
     dt = h / substeps
     for s in range(substeps):
         da = d0 + (s / substeps) * (d1 - d0)
@@ -121,7 +151,22 @@ def advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, coef, r_power, abs_power
 
 @njit(cache=True)
 def initial_z(K, T1, T2, T3, r, rdot, rudder):
-    """The nomoto2 auxiliary state z = T1 T2 r' + (T1 + T2) r - K T3 d (unused by nomoto1)."""
+    """The nomoto2 auxiliary state z = T1 T2 r' + (T1 + T2) r - K T3 d (unused by nomoto1).
+
+    Parameters
+    ----------
+    K, T1, T2, T3 : float
+        Gain (1/s) and time constants (s).
+    r, rdot : float
+        Yaw rate (rad/s) and yaw acceleration (rad/s^2).
+    rudder : float
+        Effective rudder angle (rad).
+
+    Returns
+    -------
+    float
+        z (rad).
+    """
     return T1 * T2 * rdot + (T1 + T2) * r - K * T3 * rudder
 
 
@@ -217,19 +262,46 @@ def simulate_kernel(
     trig,
     substeps,
 ):
-    """Integrate ``m`` runs of the model over every segment ``bounds[i] = (start, stop)`` with RK4,
-    ``substeps`` steps per sample; run ``j`` has its own inputs ``rudder[j]``, ``gain_scale[j]``,
-    ``time_scale[j]`` (m x n), constants (K, T1, T2, T3) = ``constants[j]``, forcing
-    coefficients ``coef[j]`` and initial states ``initial[j, i] = (psi0, r0, rdot0)``.
+    """Integrate ``m`` runs of the model over every segment with RK4, ``substeps`` steps per sample.
+
+    Run ``j`` has its own inputs ``rudder[j]``, ``gain_scale[j]``, ``time_scale[j]`` (m x n),
+    constants (K, T1, T2, T3) = ``constants[j]``, forcing coefficients ``coef[j]`` and initial states
+    ``initial[j, i] = (psi0, r0, rdot0)`` for segment ``bounds[i] = (start, stop)``.
 
     Every (run, segment) pair is a lane and all lanes advance one sample together: the
     lanes are independent, so the loops over them run as vector instructions instead of one
     long chain of dependent operations (several times faster for a window of shooting
     intervals, or for the runs of a finite-difference Jacobian). Same steps as ``advance``.
 
-    Returns heading (rad) and yaw rate (rad/s) of every run at every sample (m x n, NaN
-    outside the segments). A blow-up (non-finite state, |r| > 1e3 rad/s) fills the rest of
-    its segment with NaN.
+    Parameters
+    ----------
+    order : int
+        1 or 2 (nomoto1, nomoto2).
+    h : float
+        Sample time (s).
+    rudder : numpy.ndarray
+        (m, n) effective rudder angle (rad).
+    gain_scale, time_scale : numpy.ndarray
+        (m, n) multipliers of K and of the time constants (speed dependence; 1 without it).
+    constants : numpy.ndarray
+        (m, 4) K (1/s), T1, T2, T3 (s).
+    bounds : numpy.ndarray
+        (segments, 2) half-open sample ranges.
+    initial : numpy.ndarray
+        (m, segments, 3) initial heading (rad), yaw rate (rad/s), yaw acceleration (rad/s^2).
+    coef : numpy.ndarray
+        Forcing coefficients (rad/s per term).
+    r_power, abs_power, harmonic, trig : numpy.ndarray
+        Each forcing term's powers of r and |r|, heading harmonic and trigonometric function
+        (``effects.ForcingTerm``).
+    substeps : int
+        RK4 steps per sample.
+
+    Returns
+    -------
+    heading, yaw_rate : numpy.ndarray
+        (m, n) heading (rad) and yaw rate (rad/s) of every run, NaN outside the segments. A blow-up
+        (non-finite state, |r| > 1e3 rad/s) fills the rest of its segment with NaN.
     """
     runs, n = rudder.shape
     segments = bounds.shape[0]
@@ -346,9 +418,22 @@ def simulate_kernel(
 
 
 def forcing(psi: np.ndarray, r: np.ndarray, terms) -> np.ndarray:
-    """Yaw forcing (rad/s) of ``terms`` (each with coefficient, r_power, abs_power, harmonic, trig:
-    ``effects.ForcingTerm``) on every sample of heading ``psi`` (rad) and yaw rate ``r`` (rad/s),
-    by the integrator's own evaluator (each sample a lane)."""
+    """Yaw forcing of ``terms`` on every sample of heading and yaw rate, by the integrator's own evaluator.
+
+    Parameters
+    ----------
+    psi : numpy.ndarray
+        Heading (rad).
+    r : numpy.ndarray
+        Yaw rate (rad/s).
+    terms : sequence of ForcingTerm
+        Each with coefficient, r_power, abs_power, harmonic and trig (``effects.ForcingTerm``).
+
+    Returns
+    -------
+    numpy.ndarray
+        The forcing (rad/s) per sample (each sample a lane).
+    """
     n = len(psi)
     out = np.zeros(n)
     if terms:
@@ -360,7 +445,23 @@ def forcing(psi: np.ndarray, r: np.ndarray, terms) -> np.ndarray:
 
 
 def substeps_for(h: float, fastest_time_constant: float, steps_per_time_constant: float = 2.0) -> int:
-    """RK4 substeps per sample: ``steps_per_time_constant`` steps or more per fastest time
-    constant (by default a step of at most half of it: RK4 is stable to 2.8 and its error on that
-    mode is below 1e-3 there), at most 200."""
+    """RK4 substeps per sample: ``steps_per_time_constant`` steps or more per fastest time constant.
+
+    By default a step of at most half of it: RK4 is stable to h / T = 2.8 and its error on that mode
+    is below 1e-3 there; at most 200.
+
+    Parameters
+    ----------
+    h : float
+        Sample time (s).
+    fastest_time_constant : float
+        The model's fastest time constant (s).
+    steps_per_time_constant : float
+        Steps per fastest time constant.
+
+    Returns
+    -------
+    int
+        Substeps per sample, 1 to 200.
+    """
     return int(min(200, max(1, np.ceil(steps_per_time_constant * h / max(fastest_time_constant, 1e-3)))))

@@ -11,7 +11,23 @@ import numpy as np
 
 
 def signal_metrics(measured: np.ndarray, model: np.ndarray) -> dict:
-    """RMSE, correlation R, centred RMS difference E' and STD ratio, NRMSE fit % (NaN-safe)."""
+    """How closely a model's signal follows the measured one, as the truncated LS-SVM paper measures it.
+
+    RMSE, correlation R, centred RMS difference E' and STD ratio (the Taylor diagram's statistics, as
+    Xu and Guedes Soares 2023 report them), and the NRMSE fit in per cent; samples where either is not
+    finite are left out.
+
+    Parameters
+    ----------
+    measured, model : numpy.ndarray
+        The two signals, same unit (rad or rad/s).
+
+    Returns
+    -------
+    dict
+        'rmse' (the signal's unit), 'r', 'e_centred' (over the measured std), 'std_ratio',
+        'fit_percent', and 'diverged' (some model sample not finite).
+    """
     ok = np.isfinite(measured) & np.isfinite(model)
     if ok.sum() < 2:
         return {
@@ -38,15 +54,43 @@ def signal_metrics(measured: np.ndarray, model: np.ndarray) -> dict:
 
 
 def noise_limited_correlation(measured: np.ndarray, noise: float) -> float:
-    """The correlation a perfect model's free run reaches with ``measured``, which carries white
-    noise of std ``noise`` (same unit): sqrt(1 - noise^2 / var(measured)); a slow ship whose yaw
-    rate spreads twice its noise allows 0.87 at most."""
+    """The correlation a perfect model's free run reaches with a signal carrying white noise.
+
+    sqrt(1 - noise^2 / var(measured)): a slow ship whose yaw rate spreads twice its noise allows
+    0.87 at most.
+
+    Parameters
+    ----------
+    measured : numpy.ndarray
+        The measured signal.
+    noise : float
+        Its white noise's std (same unit).
+
+    Returns
+    -------
+    float
+        The best correlation, 0 to 1.
+    """
     variance = float(np.var(measured))
     return float(np.sqrt(max(0.0, 1.0 - noise**2 / variance))) if variance > 0 else 0.0
 
 
 def free_run_fit(heading: np.ndarray, yaw_rate: np.ndarray, sim_heading: np.ndarray, sim_yaw_rate: np.ndarray) -> dict:
-    """The ``fit`` record of the JSON contract, from free-run heading and yaw rate (SI)."""
+    """The ``fit`` record of an estimate, from the free-run heading and yaw rate against the measured.
+
+    Parameters
+    ----------
+    heading, yaw_rate : numpy.ndarray
+        Measured heading (rad) and yaw rate (rad/s).
+    sim_heading, sim_yaw_rate : numpy.ndarray
+        The model's free run (rad, rad/s).
+
+    Returns
+    -------
+    dict
+        ``signal_metrics`` of both, keyed 'rmse_heading', 'r_yaw_rate', ..., with 'horizon'
+        ('free-run') and 'diverged'.
+    """
     h = signal_metrics(heading, sim_heading)
     r = signal_metrics(yaw_rate, sim_yaw_rate)
     return {
@@ -66,7 +110,24 @@ def free_run_fit(heading: np.ndarray, yaw_rate: np.ndarray, sim_heading: np.ndar
 
 
 def effective_sample_fraction(residual: np.ndarray, max_lag: int = 50) -> float:
-    """1 / (1 + 2 sum rho_k): the share of samples that are independent, from the residual's autocorrelation."""
+    """The share of samples that are independent, 1 / (1 + 2 sum rho_k), from the residual's autocorrelation.
+
+    The sum runs from lag 1 while the autocorrelation rho_k stays above 0.05 (up to ``max_lag``, at
+    most a quarter of the samples); a residual variance divided by the fraction is the long-run
+    variance of its mean's samples, as independent samples would give it.
+
+    Parameters
+    ----------
+    residual : numpy.ndarray
+        The residual series.
+    max_lag : int
+        The longest lag counted (samples).
+
+    Returns
+    -------
+    float
+        The fraction, at most 1.
+    """
     e = residual - residual.mean()
     var = e @ e
     if var <= 0 or len(e) < 4:

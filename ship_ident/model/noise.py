@@ -23,13 +23,39 @@ _RESIDUAL_VARIANCE_SHARE = 1 - 0.4126
 
 
 def robust_std(values: np.ndarray) -> float:
-    """MAD_TO_STD * median absolute deviation: the std of Gaussian noise, blind to a few outliers."""
+    """The std of Gaussian noise, blind to a few outliers: MAD_TO_STD (1.4826) times the median absolute deviation.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        The samples.
+
+    Returns
+    -------
+    float
+        The std, in the samples' unit.
+    """
     return float(MAD_TO_STD * np.median(np.abs(values - np.median(values))))
 
 
 def noise_level(values: np.ndarray, floor: float) -> float:
-    """Std of white measurement noise (the signal's unit), at least ``floor``: the robust residual
-    of a local quadratic fit over 11 samples (interior samples only), corrected for its smoothing."""
+    """Std of white measurement noise, at least ``floor``.
+
+    The robust residual of a local quadratic fit over 11 samples (interior samples only), corrected
+    for its smoothing: a turning hull's signal is smooth over 11 samples, the sensor's noise is not.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        A measured signal on a uniform grid.
+    floor : float
+        The smallest value returned (the signal's unit).
+
+    Returns
+    -------
+    float
+        The noise std (the signal's unit); ``floor`` for fewer than 15 samples.
+    """
     if len(values) < 15:
         return floor
     residual = np.convolve(values, _QUADRATIC_RESIDUAL, mode="valid")

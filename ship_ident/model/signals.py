@@ -51,6 +51,7 @@ class Signals:
 
     @property
     def rows(self) -> np.ndarray:
+        """The indices of the samples the regression uses (``mask``: inside a segment, away from its edges)."""
         return np.flatnonzero(self.mask)
 
 
@@ -106,9 +107,33 @@ def compute_signals(
 ) -> Signals:
     """Smooth and differentiate a dataset segment by segment.
 
+    Savitzky-Golay (Savitzky and Golay 1964) local polynomials, or a Rauch-Tung-Striebel smoother
+    (Rauch, Tung and Striebel 1965) of a constant-jerk yaw model fusing heading and yaw rate.
     ``window_s`` defaults to ``smoothing_window`` of the yaw-rate noise
     estimated from the data; the RTS smoother uses the estimated heading and
     yaw-rate noise levels as its measurement noise.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data (rad, rad/s).
+    method : str
+        'savgol' or 'rts' (DIFFERENTIATION_METHODS).
+    window_s : float or None
+        Savitzky-Golay window (s); None: from the yaw-rate noise.
+    jerk_psd : float
+        The RTS model's yaw-jerk power spectral density ((rad/s^3)^2 s).
+
+    Returns
+    -------
+    Signals
+        Heading, smoothed yaw rate and its first two derivatives (rad, rad/s, rad/s^2, rad/s^3) on
+        the dataset's grid, with the regression's row mask.
+
+    Raises
+    ------
+    DataError
+        For an unknown method or non-finite data.
     """
     if method not in DIFFERENTIATION_METHODS:
         raise DataError(f"unknown differentiation method {method!r}; choose from {', '.join(DIFFERENTIATION_METHODS)}")

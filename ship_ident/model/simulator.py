@@ -90,14 +90,28 @@ VESSEL_KINDS = {
 
 
 def random_vessel(rng: np.random.Generator, kind: str = "any") -> Vessel:
-    """A vessel drawn at random over wide ranges (``VESSEL_KINDS``; ``any``: a USV two times in
-    three, else a slow ship). T2 is a share of T1 and capped at 1.5 s for USVs; the cubic
-    damping alpha is drawn so that alpha r^2 lies in [-0.1, 0.5] at the turn rate of the rudder
-    at its limit (K * limit): with alpha < 0 the steady turn r + alpha r^3 = K delta exists only
-    while -alpha (K delta)^2 < 4/27, so every rudder the gear can give still ends in a steady
-    turn (a draw at -0.2 for 20 deg of rudder spun up without bound at 25 deg); the rudder
-    offset in +-1.5 deg; all other effect parameters take the presets' values. The name carries
-    the drawn values, so a failing case can be read off."""
+    """A vessel drawn at random over wide ranges (``VESSEL_KINDS``).
+
+    ``any``: a USV two times in three, else a slow ship. T2 is a share of T1 and capped at 1.5 s for
+    USVs; the cubic damping alpha is drawn so that alpha r^2 lies in [-0.1, 0.5] at the turn rate of
+    the rudder at its limit (K * limit): with alpha < 0 the steady turn r + alpha r^3 = K delta exists
+    only while -alpha (K delta)^2 < 4/27, so every rudder the gear can give still ends in a steady
+    turn (a draw at -0.2 for 20 deg of rudder spun up without bound at 25 deg); the rudder offset in
+    +-1.5 deg; all other effect parameters take the presets' values. The name carries the drawn
+    values, so a failing case can be read off.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The random source.
+    kind : str
+        'usv', 'ship' or 'any'.
+
+    Returns
+    -------
+    Vessel
+        Its name, description, true parameters (SI units) and effects.
+    """
     if kind == "any":
         kind = "usv" if rng.uniform() < 2 / 3 else "ship"
     if kind not in VESSEL_KINDS:
@@ -148,6 +162,18 @@ class Noise:
     speed: float = 0.02
 
     def scaled(self, factor: float) -> Noise:
+        """Every sensor's noise multiplied by ``factor``.
+
+        Parameters
+        ----------
+        factor : float
+            The multiple of these levels.
+
+        Returns
+        -------
+        Noise
+            The scaled levels (SI units).
+        """
         return Noise(self.rudder * factor, self.heading * factor, self.yaw_rate * factor, self.speed * factor)
 
 
@@ -311,6 +337,39 @@ def simulate(
     (time_s, values)`` changes true parameters at that time (a vessel loaded
     mid-trip); the motion stays continuous and ``info['truth_after']`` holds
     the new values.
+
+    Parameters
+    ----------
+    maneuver : str
+        One of MANEUVERS (zigzag10, zigzag20, turning, random, mixed, steps, steady_turns, legs).
+    vessel : str or Vessel
+        A preset of VESSELS by name, or a vessel.
+    effects : sequence of str or None
+        The effects simulated; None: the vessel's own.
+    duration : float
+        Length of the record (s).
+    sample_time : float
+        Sample time of the measurements (s).
+    noise : float or Noise
+        Sensor noise, as a multiple of the realistic levels or as levels (SI units).
+    seed : int
+        Seed of the manoeuvre's and the noise's random draws.
+    parameters : dict or None
+        True values that override the vessel's (SI units).
+    amplitude : float or None
+        Rudder amplitude (rad) of the manoeuvre; None: its own.
+    fine_step : float
+        Integration step of the truth (s).
+    model : str
+        The base model simulated ('nomoto2', 'nomoto1', ...).
+    change : tuple of (float, dict) or None
+        (time s, new true values) of a change mid-record.
+
+    Returns
+    -------
+    Simulation
+        The noisy measurements (a Dataset), the truth (parameters, noise-free heading, yaw rate and
+        rudder) and facts of the run in ``info``.
     """
     vessel = VESSELS[vessel] if isinstance(vessel, str) else vessel
     effects = vessel.seed_effects if effects is None else tuple(effects)

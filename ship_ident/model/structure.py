@@ -122,35 +122,85 @@ class Structure:
 
     @property
     def order(self) -> int:
+        """The base model's order: 1 for nomoto1 (one time constant T), 2 for nomoto2 (T1, T2, T3)."""
         return 1 if self.model == "nomoto1" else 2
 
     @property
     def needs_speed(self) -> bool:
+        """Whether an effect needs the measured speed (speed_dependence)."""
         return any(e.needs_speed for e in self.effects)
 
     def with_effects(self, effects) -> Structure:
+        """The same base model with other effects.
+
+        Parameters
+        ----------
+        effects : sequence of str
+            Effect names (EFFECTS).
+
+        Returns
+        -------
+        Structure
+            The new structure.
+        """
         return Structure(self.model, list(effects))
 
     def adding(self, effect: str) -> Structure:
-        """This structure with ``effect`` added, in place of the effects whose term it includes."""
+        """This structure with ``effect`` added, in place of the effects whose term it includes.
+
+        Parameters
+        ----------
+        effect : str
+            The effect's name.
+
+        Returns
+        -------
+        Structure
+            The new structure.
+        """
         replaced = EFFECTS[effect].replaces
         return self.with_effects([e for e in self.effect_names if e not in replaced] + [effect])
 
     def neutral_effect_start(self, base: dict) -> dict:
-        """A start for this structure from ``base``, the parameters of the model without some of
-        its effects (in either form): the base converted to this structure's form, the missing
-        effects' parameters at their neutral values, where they do nothing, so the start simulates
-        exactly as the model it came from (a cubic damping carried over into a course instability)."""
+        """A start for this structure from the parameters of the model without some of its effects.
+
+        The base converted to this structure's form, the missing effects' parameters at their neutral
+        values, where they do nothing, so the start simulates exactly as the model it came from (a cubic
+        damping carried over into a course instability).
+
+        Parameters
+        ----------
+        base : dict
+            The nested model's parameters, in either form (SI units).
+
+        Returns
+        -------
+        dict
+            Every parameter of this structure (SI units).
+        """
         start = self.in_form(base)
         for effect in self.effects:
             start.update({k: v for k, v in effect.neutral().items() if k not in start})
         return start
 
     def in_form(self, params: dict) -> dict:
-        """``params`` (either form) with the base parameters and the effects' forcing coefficients
-        in this structure's form. Nomoto to acceleration divides the yaw equation by T (T1 T2);
-        back, by the linear damping a1, which must be positive (else the Nomoto form does not exist
-        and ``params`` are returned as they are)."""
+        """Parameters (either form) with the base parameters and the effects' forcing in this structure's form.
+
+        Nomoto to acceleration divides the yaw equation by T (T1 T2); back, by the linear damping a1,
+        which must be positive (else the Nomoto form does not exist and ``params`` are returned as they
+        are): first order, Norrbin's r' = b delta - a1 r + G against Nomoto's T r' + r = K delta + T G,
+        K = b / a1 and T = 1 / a1.
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+
+        Returns
+        -------
+        dict
+            The parameters in this structure's form (SI units).
+        """
         out = dict(params)
         if self.form == "acceleration" and "a1" not in params:
             for name in NOMOTO_NAMES:
@@ -188,21 +238,68 @@ class Structure:
         return out
 
     def label(self) -> str:
+        """The structure's name, 'model+effect+...' (as ``--model`` and ``--effects`` give it).
+
+        Returns
+        -------
+        str
+            The label.
+        """
         return "+".join((self.model,) + self.effect_names)
 
     def to_json(self) -> dict:
+        """The structure as the JSON records give it.
+
+        Returns
+        -------
+        dict
+            {'model': name, 'effects': [names]}.
+        """
         return {"model": self.model, "effects": list(self.effect_names)}
 
     def parameter(self, name: str) -> Parameter:
+        """The ``Parameter`` (unit, description, bounds, initial value) of one of the structure's parameters.
+
+        Parameters
+        ----------
+        name : str
+            The parameter's name.
+
+        Returns
+        -------
+        Parameter
+            Its definition.
+        """
         return next(p for p in self.parameters if p.name == name)
 
     def initial_parameters(self) -> dict:
+        """Every parameter at its initial value (a typical hull's).
+
+        Returns
+        -------
+        dict
+            Parameter -> value (SI units).
+        """
         return {p.name: p.initial for p in self.parameters}
 
     def bounds(self, names=None, dataset: Dataset | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of the parameters ``names``: the physical ones, narrowed with
-        ``dataset`` by every effect's ``data_bounds`` (e.g. cubic_yaw: stable over the turn
-        rates the data reach)."""
+        """Lower and upper bounds of parameters: the physical ones, narrowed by the data's.
+
+        Every effect's ``data_bounds`` narrows them with ``dataset`` (e.g. cubic_yaw: stable over the
+        turn rates the data reach).
+
+        Parameters
+        ----------
+        names : sequence of str or None
+            The parameters (default: the free ones).
+        dataset : Dataset or None
+            The data whose bounds apply (None: the physical bounds alone).
+
+        Returns
+        -------
+        lower, upper : numpy.ndarray
+            Bounds per parameter (SI units).
+        """
         names = self.free_names if names is None else names
         limits = {n: (self.parameter(n).lower, self.parameter(n).upper) for n in names}
         if dataset is not None and self.form == "nomoto":  # data bounds are stated in the Nomoto form
@@ -214,6 +311,18 @@ class Structure:
         return np.array([limits[n][0] for n in names]), np.array([limits[n][1] for n in names])
 
     def check_data(self, dataset: Dataset) -> None:
+        """Check that the data carry what the structure needs.
+
+        Parameters
+        ----------
+        dataset : Dataset
+            The data.
+
+        Raises
+        ------
+        StructureError
+            When an effect needs the speed and the data have none.
+        """
         if self.needs_speed and dataset.speed is None:
             raise StructureError("speed_dependence needs a speed signal; record /usv/speed or add a speed column")
 
@@ -221,11 +330,27 @@ class Structure:
     def simulate(
         self, params: dict, dataset: Dataset, initial: list | None = None, substeps: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Free-run heading (rad) and measured yaw rate (rad/s) from the measured rudder.
+        """Free-run heading and measured yaw rate from the measured rudder.
 
         Each segment starts from ``initial[i] = (psi0, r0, rdot0)`` (true
         hull states) or, by default, from the measured heading and yaw rate at
         its first sample with r' = 0.
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+        dataset : Dataset
+            The data (its rudder drives the run; rad).
+        initial : list of tuple or None
+            Each segment's initial heading (rad), yaw rate (rad/s) and yaw acceleration (rad/s^2).
+        substeps : int or None
+            RK4 steps per sample (default: from the fastest time constant).
+
+        Returns
+        -------
+        heading, yaw_rate : numpy.ndarray
+            Heading (rad) and the yaw rate the sensor would read (rad/s), NaN outside the segments.
         """
         psi, r = self.simulate_runs([params], dataset, None if initial is None else [initial], substeps)
         return psi[0], r[0]
@@ -233,10 +358,26 @@ class Structure:
     def simulate_runs(
         self, param_sets: list, dataset: Dataset, initials: list | None = None, substeps: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``simulate`` for several parameter sets (and initial states) at once, one compiled call
-        (the runs advance side by side: far cheaper than one call each, e.g. for a Jacobian).
-        Returns heading and measured yaw rate, one row per run; ``substeps`` is shared (by
-        default that of the fastest time constant of all runs)."""
+        """``simulate`` for several parameter sets (and initial states) at once, in one compiled call.
+
+        The runs advance side by side: far cheaper than one call each, e.g. for a Jacobian.
+
+        Parameters
+        ----------
+        param_sets : list of dict
+            Parameter sets (SI units).
+        dataset : Dataset
+            The data.
+        initials : list or None
+            Per run, each segment's initial state (as ``simulate``'s ``initial``).
+        substeps : int or None
+            RK4 steps per sample, shared (default: that of the fastest time constant of all runs).
+
+        Returns
+        -------
+        heading, yaw_rate : numpy.ndarray
+            (runs, n) heading (rad) and measured yaw rate (rad/s).
+        """
         self.check_data(dataset)
         h = dataset.sample_time
         substeps = substeps or substeps_for(h, min(self.fastest_time_constant(p) for p in param_sets))
@@ -264,7 +405,20 @@ class Structure:
         The integrator solves the Nomoto form. The acceleration form multiplied by a positive
         number m is that form with K = m b0, T1 + T2 = m, T1 T2 = m m2 (T1 = T2 = 2 m2: m = 4 m2)
         and T3 = b1 / b0 (first order: T = m = 1 / max(|a1|, 1e-3 1/s), K = m b), its linear damping
-        moved to the forcing as (1 - m a1) r and the effects' forcing times m."""
+        moved to the forcing as (1 - m a1) r and the effects' forcing times m.
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+
+        Returns
+        -------
+        constants : tuple of float
+            K (1/s), T1, T2, T3 (s).
+        terms : list of ForcingTerm
+            The forcing terms (rad/s).
+        """
         terms = [t for e in self.effects for t in e.forcing_terms(params)]
         if self.form == "nomoto":
             if self.order == 1:
@@ -280,7 +434,18 @@ class Structure:
         return constants, [ForcingTerm(1.0 - inertia * params["a1"], r_power=1), *scaled]
 
     def fastest_time_constant(self, params: dict) -> float:
-        """The fastest time scale of the linear model (s), which sets the integration step."""
+        """The fastest time scale of the linear model, which sets the integration step.
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+
+        Returns
+        -------
+        float
+            The time constant (s).
+        """
         if self.form == "nomoto":
             return params["T"] if self.order == 1 else min(params["T1"], params["T2"])
         return fastest_time_constant({n: params[n] for n in self.base_names})
@@ -288,8 +453,26 @@ class Structure:
     def effective_inputs(
         self, params: dict, time: np.ndarray, rudder: np.ndarray, speed: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The rudder angle acting on the hull (rad) and the per-sample multipliers of K and of
-        the time constants, after every effect's rudder and speed hooks."""
+        """The rudder angle acting on the hull and the multipliers of K and of the time constants.
+
+        After every effect's rudder and speed hooks.
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+        time : numpy.ndarray
+            Sample times (s).
+        rudder : numpy.ndarray
+            The measured rudder angle (rad).
+        speed : numpy.ndarray or None
+            The measured speed (m/s).
+
+        Returns
+        -------
+        rudder, gain_scale, time_scale : numpy.ndarray
+            The effective rudder (rad) and the per-sample multipliers (dimensionless).
+        """
         for effect in self.effects:
             rudder = effect.effective_rudder(time, rudder, params)
         gain = np.ones(len(time))
@@ -301,17 +484,53 @@ class Structure:
         return rudder, gain, time_scale
 
     def yaw_rate_bias(self, params: dict) -> float:
-        """What the yaw-rate sensor reads (rad/s) when the hull does not turn (gyro bias)."""
+        """What the yaw-rate sensor reads when the hull does not turn (gyro bias).
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+
+        Returns
+        -------
+        float
+            The bias (rad/s).
+        """
         return float(self.measured_yaw_rate(np.zeros(1), params)[0])
 
     def measured_yaw_rate(self, r: np.ndarray, params: dict) -> np.ndarray:
+        """What the yaw-rate sensor reads when the hull turns at ``r``, after every effect's sensor hook.
+
+        Parameters
+        ----------
+        r : numpy.ndarray
+            The hull's true yaw rate (rad/s).
+        params : dict
+            The model's parameters (SI units).
+
+        Returns
+        -------
+        numpy.ndarray
+            The reading (rad/s).
+        """
         for effect in self.effects:
             r = effect.measured_yaw_rate(r, params)
         return r
 
     # --- regression -------------------------------------------------------
     def regression(self, signals) -> Regression:
-        """Build ``r = X w`` on the usable rows; effects may fix parameters first."""
+        """The equation-error regression ``r = X w`` on the usable rows; effects may fix parameters first.
+
+        Parameters
+        ----------
+        signals : Signals
+            Smoothed signals and derivatives (``compute_signals``).
+
+        Returns
+        -------
+        Regression
+            X, y and the column names, with the fixed parameters.
+        """
         fixed = {}
         for effect in self.effects:
             fixed.update(effect.prepare(signals))
@@ -341,7 +560,22 @@ class Structure:
         return Regression(X=X, y=y[rows], columns=list(cols), fixed=fixed, signals=s)
 
     def parameters_from_coefficients(self, w: np.ndarray, regression: Regression) -> tuple[dict, list[str]]:
-        """Closed-form map from regression coefficients to physical parameters, with flags."""
+        """Closed-form map from regression coefficients to physical parameters, with flags.
+
+        Parameters
+        ----------
+        w : numpy.ndarray
+            The regression coefficients.
+        regression : Regression
+            The regression they solve (its columns).
+
+        Returns
+        -------
+        parameters : dict
+            The physical parameters (SI units).
+        flags : list of str
+            What the map found ('complex_time_constants', 'K_out_of_bounds', ...).
+        """
         c = dict(zip(regression.columns, w))
         flags = []
         base = {"K": c["delta"]}
@@ -373,7 +607,18 @@ class Structure:
         return params, flags
 
     def clip_to_bounds(self, params: dict) -> dict:
-        """Parameters moved just inside their physical bounds (K > 0, T > 0, T3 >= 0, ...)."""
+        """Parameters moved just inside their physical bounds (K > 0, T > 0, T3 >= 0, ...).
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+
+        Returns
+        -------
+        dict
+            The parameters inside their bounds; a non-finite value replaced by its initial one.
+        """
         out = dict(params)
         for p in self.parameters:
             v = out[p.name]

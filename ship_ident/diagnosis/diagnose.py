@@ -227,9 +227,11 @@ class Diagnosis:
 
     @property
     def recommendation(self) -> dict | None:
-        """The model to fit next when an effect is missing: the significant candidate's base model
-        (nomoto1 where the data do not determine a second pole, ``first_order_view``) and effects;
-        None for any other verdict."""
+        """The model to fit next when an effect is missing, as the JSON's ``recommendation`` gives it.
+
+        The significant candidate's base model (nomoto1 where the data do not determine a second pole,
+        ``first_order_view``) and effects, {'model': ..., 'effects': [...]}; None for any other verdict.
+        """
         best = next((c for c in self.candidates if c.significant), None)
         if best is None or best.estimate is None:
             return None

@@ -60,6 +60,7 @@ from .input_checks import (
     window_truncation,
 )
 from .samples import ROLES, Sample
+from .window import SampleWindow
 
 OK, WARN, ERROR = 0, 1, 2
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
@@ -219,7 +220,7 @@ class OnlineIdentifier:
         self._lock = threading.Lock()
         self._config = config.validate()
         cap = config.max_window_samples
-        self._window = {role: deque(maxlen=cap) for role in ROLES}
+        self._window = {role: SampleWindow(cap) for role in ROLES}
         self._newest = {role: -math.inf for role in ROLES}  # s, last accepted stamp per role
         self._latest_time = -math.inf  # s, newest stamp or clock reading seen
         self._next_due: float | None = None
@@ -263,7 +264,7 @@ class OnlineIdentifier:
             outcome = self._check(sample)
             self.counts[outcome] += 1
             if outcome == "accepted":
-                self._window[sample.role].append((sample.time, sample.value))
+                self._window[sample.role].append(sample.time, sample.value)
                 self._newest[sample.role] = sample.time
                 self._latest_time = max(self._latest_time, sample.time)
             return outcome
@@ -360,9 +361,9 @@ class OnlineIdentifier:
             step = config.refit_period / WATCHES_PER_REFIT  # on a grid: a timer's jitter skips none
             self._next_watch = self._next_watch + step if now - self._next_watch < step else now + step
             oldest = max(now - min(2 * config.change_test_length, config.window_length), self._window_floor)
-            series = {role: _as_array(self._window[role]) for role in ROLES}
+            series = {role: self._window[role].array(oldest) for role in ROLES}
         try:
-            dataset = _resample(config, {role: s[s[:, 0] >= oldest] for role, s in series.items()})
+            dataset = _resample(config, series)
             ratio, changed_at = self._change.quick_test(config.structure(), dataset)
         except (DataError, StructureError, ValueError):
             return False
@@ -380,8 +381,8 @@ class OnlineIdentifier:
             self._observe_clock(now)  # after: a clock jump restarts the schedule from now
             config = self._config
             for role in ROLES:
-                self._prune(self._window[role], max(now - config.window_length, self._window_floor))
-            series = {role: _as_array(self._window[role]) for role in ROLES}
+                self._window[role].prune(max(now - config.window_length, self._window_floor))
+            series = {role: self._window[role].array() for role in ROLES}
             full = [role for role in ROLES if len(self._window[role]) == config.max_window_samples]
             newest = dict(self._newest)
             counts = dict(self.counts)
@@ -412,13 +413,8 @@ class OnlineIdentifier:
         with self._lock:
             config = self._config
             oldest = max(now - config.window_length, self._window_floor)
-            series = {role: _as_array(self._window[role]) for role in ROLES}
-        return _resample(config, {role: s[s[:, 0] >= oldest] for role, s in series.items()})
-
-    @staticmethod
-    def _prune(window: deque, oldest: float) -> None:
-        while window and window[0][0] < oldest:
-            window.popleft()
+            series = {role: self._window[role].array(oldest) for role in ROLES}
+        return _resample(config, series)
 
     def _fit(self, config: OnlineConfig, series: dict, last_good, record: RefitRecord) -> None:
         try:
@@ -750,11 +746,6 @@ def _resample(config: OnlineConfig, series: dict) -> Dataset:
     return resample_series({r: (series[r][:, 0], series[r][:, 1]) for r in roles}, config.sample_time, config.gap)
 
 
-def _as_array(window: deque) -> np.ndarray:
-    """The (time, value) pairs of a window as an (n, 2) array (twice as fast as np.array on tuples)."""
-    return np.fromiter(chain.from_iterable(window), dtype=float, count=2 * len(window)).reshape(-1, 2)
-
-
 def _short_test(config: OnlineConfig) -> float:
     """s of newest data of the change detector's quick test: one refit period, 3 s to a third of
     ``change_test_length``."""
@@ -818,27 +809,36 @@ class EstimateScatter:
 
     def __init__(self):
         self.recent = deque(maxlen=SCATTER_PAIRS)  # accepted estimates (estimator's errors), oldest first
+        # for each recent estimate, its pair rows with each later one ({parameter: (d^2 / U, 2 / U)}):
+        # a pair's rows never change, so a new estimate adds only its own pairs
+        self._rows = deque(maxlen=SCATTER_PAIRS)
+        self._newest = (None, [])  # the estimate components() last saw and its rows with the recent ones
 
     def add(self, estimate) -> None:
+        seen, rows = self._newest
+        if seen is not estimate:
+            rows = [_pair_rows(a, estimate) for a in self.recent]
+        for earlier, row in zip(self._rows, rows):
+            earlier.append(row)
         self.recent.append(estimate)
+        self._rows.append([])
+        self._newest = (None, [])
 
     def forget(self) -> None:
         self.recent.clear()
+        self._rows.clear()
+        self._newest = (None, [])
 
     def components(self, estimate) -> dict:
         """{parameter: (phi^2 >= 1, sigma^2 >= 0)} from the recent estimates and this one."""
-        chain_ = list(self.recent) + [estimate]
-        pairs = {name: [] for name in estimate.parameters}  # (d^2 / U, 2 / U)
-        for i, a in enumerate(chain_):
-            for b in chain_[i + 1 :]:
-                (a_shares, a_time), (b_shares, b_time) = _shared_shares(a, b), _shared_shares(b, a)
+        newest = [_pair_rows(a, estimate) for a in self.recent]
+        self._newest = (estimate, newest)
+        pairs = {name: [] for name in estimate.parameters}  # (d^2 / U, 2 / U), pairs in the order of the chain
+        for later, new in zip(self._rows, newest):
+            for row in chain(later, (new,)):
                 for name, rows in pairs.items():
-                    va, vb = a.std_errors.get(name, 0.0) ** 2, b.std_errors.get(name, 0.0) ** 2
-                    if va + vb > 0 and math.isfinite(va + vb) and name in a.parameters:
-                        ia, ib = a_shares.get(name, a_time), b_shares.get(name, b_time)
-                        apart = va * (1 - ia) + vb * (1 - ib) + (math.sqrt(va * ia) - math.sqrt(vb * ib)) ** 2
-                        unit = max(apart, MIN_FRESH_SHARE * (va + vb))
-                        rows.append(((b.parameters[name] - a.parameters[name]) ** 2 / unit, 2.0 / unit))
+                    if name in row:
+                        rows.append(row[name])
         return {name: _drift_and_own_error(rows) for name, rows in pairs.items()}
 
     def honest(self, estimate) -> dict:
@@ -848,6 +848,22 @@ class EstimateScatter:
             phi_square, sigma_square = components.get(name, (1.0, 0.0))
             honest[name] = math.sqrt(phi_square * std**2 + sigma_square)
         return honest
+
+
+def _pair_rows(a, b) -> dict:
+    """{parameter: (d^2 / U, 2 / U)} of the estimates ``a`` (the older) and ``b``: their squared
+    difference d^2 over the variance U their fresh shares give it (see ``EstimateScatter``), and
+    2 / U; parameters with no finite, positive joint variance have none."""
+    (a_shares, a_time), (b_shares, b_time) = _shared_shares(a, b), _shared_shares(b, a)
+    rows = {}
+    for name, value in a.parameters.items():
+        va, vb = a.std_errors.get(name, 0.0) ** 2, b.std_errors.get(name, 0.0) ** 2
+        if va + vb > 0 and math.isfinite(va + vb) and name in b.parameters:
+            ia, ib = a_shares.get(name, a_time), b_shares.get(name, b_time)
+            apart = va * (1 - ia) + vb * (1 - ib) + (math.sqrt(va * ia) - math.sqrt(vb * ib)) ** 2
+            unit = max(apart, MIN_FRESH_SHARE * (va + vb))
+            rows[name] = ((b.parameters[name] - value) ** 2 / unit, 2.0 / unit)
+    return rows
 
 
 def _shared_shares(a, b) -> tuple[dict, float]:

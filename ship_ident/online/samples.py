@@ -35,3 +35,14 @@ class Sample:
     time: float
     role: str
     value: float
+
+
+def dataset_samples(dataset) -> list[Sample]:
+    """A uniformly sampled ``model.dataset.Dataset`` as time-ordered rudder, heading and yaw-rate
+    samples (the heading wrapped, as a compass gives it), as the node would receive them."""
+    heading = dataset.meta.get("wrapped_heading", dataset.heading)
+    return [
+        Sample(float(t), role, float(v))
+        for i, t in enumerate(dataset.time)
+        for role, v in (("rudder", dataset.rudder[i]), ("heading", heading[i]), ("yaw_rate", dataset.yaw_rate[i]))
+    ]

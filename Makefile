@@ -15,6 +15,7 @@ $(STAMP): setup.py package.xml
 	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 \
 	  && apt-get update -qq && apt-get install -y -qq chromium >/dev/null; } \
 	  || echo "note: chromium not installed; the report rendering test will skip"
+	$(PY) -m ship_ident.online.warmup
 	touch $(STAMP)
 
 lint: $(STAMP)

@@ -94,3 +94,13 @@ def test_onboard_diagnosis_quick_names_a_hidden_rudder_offset_once_and_raises_no
     assert offset["added"] == "rudder_offset" and at_floor(offset, "pooled")
     assert none["hidden"] == "none" and none["done"] >= 3 and none["missing_effect"] == 0
     assert result["skipped"].keys() <= {"the window holds 65 s", "too little excitation"}
+
+
+def test_realtime_times_the_replay_of_a_usv_bag_as_a_whole_process(tmp_path):
+    """``bench realtime``'s replay figure on a 2-minute bag of seed 001's USV: a child ``replay``
+    process prints its 24 refits (one every 5 s), and its wall and CPU seconds are measured."""
+    from ship_ident.bench.realtime import hour_replay
+
+    replay = hour_replay(3, str(tmp_path), 120.0)
+    assert replay["refits"] == 24
+    assert replay["duration_s"] == 120.0 and replay["wall_s"] > 0.3 and replay["cpu_s"] > 0.3

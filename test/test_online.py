@@ -999,3 +999,73 @@ def test_a_hull_whose_rudder_lead_cancels_its_lag_publishes_T1_as_uncertain():
         assert abs(r.estimate["parameters"]["K"] / truth["K"] - 1) < 0.02
         if r.status == "OK":
             assert abs(r.estimate["parameters"]["T1"] / truth["T1"] - 1) < 0.1
+
+
+def test_sample_window_keeps_the_newest_samples_in_time_order_across_its_buffer_end():
+    """A window of 5 samples fed 23 at 10 Hz (the buffer's end passed twice) holds the newest 5;
+    pruning at 2.05 s leaves those stamped from 2.1 s; a read from 2.15 s only the newest 2."""
+    from ship_ident.online.window import SampleWindow
+
+    window = SampleWindow(5)
+    for i in range(23):
+        window.append(0.1 * i, float(i))
+    assert window.array()[:, 1].tolist() == [18.0, 19.0, 20.0, 21.0, 22.0]
+    window.prune(2.05)
+    assert window.array()[:, 1].tolist() == [21.0, 22.0] and len(window) == 2
+    assert window.array(2.15)[:, 1].tolist() == [22.0]
+    window.append(2.3, 23.0)
+    assert window.array()[:, 0] == pytest.approx([2.1, 2.2, 2.3])
+    window.clear()
+    assert window.array().shape == (0, 2)
+
+
+def test_scatter_of_recent_estimates_is_the_same_kept_pair_by_pair_as_computed_afresh():
+    """Estimates of a quick hull's K from windows sliding 5 s: 26 published (the oldest leave the
+    SCATTER_PAIRS kept), some judged and not published between them, give the newest the very
+    errors a scatter holding only the last SCATTER_PAIRS of them gives."""
+    from ship_ident.estimators.base import Estimate
+    from ship_ident.online.uncertainty import SCATTER_PAIRS, EstimateScatter
+
+    structure = OnlineConfig(model="nomoto1", effects=()).structure()
+    rng = np.random.default_rng(3)
+    estimates = [
+        Estimate(
+            structure,
+            "x",
+            {"K": 0.1 + 0.003 * rng.standard_normal(), "T": 2.0 + 0.05 * rng.standard_normal()},
+            {"K": 0.001 * (1 + i % 3), "T": 0.04},
+            {},
+            100,
+            window=(5.0 * i, 180 + 5.0 * i),
+        )
+        for i in range(27)
+    ]
+    kept, afresh = EstimateScatter(), EstimateScatter()
+    for i, estimate in enumerate(estimates[:-1]):
+        kept.honest(estimate)
+        if i % 4 == 1:
+            kept.honest(estimates[-1])  # judged, refused: not added
+        kept.add(estimate)
+    for estimate in estimates[-1 - SCATTER_PAIRS : -1]:
+        afresh.add(estimate)
+    honest = kept.honest(estimates[-1])
+    assert honest == afresh.honest(estimates[-1])
+    assert honest["K"] > 0.001 and honest["T"] > 0.04
+
+
+def test_quick_change_test_takes_the_largest_median_of_the_newest_samples():
+    """Squared errors of a hull that changed 25 samples ago (124 times its level then, falling to 100
+    times since, the 30 before at the level): the largest median over the newest 20 or more is the
+    median of all 25 since the change; a NaN among the newest 20 gives NaN, one further back ends
+    the suffixes before it."""
+    from ship_ident.online.change import largest_newest_median
+
+    squared = np.concatenate([np.full(30, 1.0), np.linspace(124.0, 100.0, 25)])
+    assert largest_newest_median(squared, 20) == 112.0
+    assert largest_newest_median(squared, 20) == max(np.median(squared[-k:]) for k in range(20, 56))
+    lost = squared.copy()
+    lost[-10] = np.nan
+    assert math.isnan(largest_newest_median(lost, 20))
+    lost = squared.copy()
+    lost[-23] = np.nan  # the suffixes of 20 to 22 samples only
+    assert largest_newest_median(lost, 20) == 110.5

@@ -98,10 +98,10 @@ def test_check_published_can_fail():
 def check_window(identifier: OnlineIdentifier, now: float) -> None:
     config = identifier.config
     for role in ROLES:
-        window = identifier._window[role]
+        window = identifier._window[role].array()
         assert len(window) <= config.max_window_samples
-        if window:
-            assert window[0][0] >= now - config.window_length
+        if len(window):
+            assert window[0, 0] >= now - config.window_length
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

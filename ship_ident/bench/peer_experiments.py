@@ -18,7 +18,7 @@ from ..io.files import write_simulation
 from ..model.simulator import Noise, simulate
 from ..online.config import OnlineConfig
 from ..online.identifier import OnlineIdentifier, run_schedule
-from ..online.samples import Sample, Topics
+from ..online.samples import Topics, dataset_samples
 from . import progress
 from .efficiency import QUANTITIES, _with_derived, record_bound, summarise
 from .peer_models import (
@@ -117,16 +117,6 @@ def recovery_time(times, k_trace, change_time: float, k_new: float) -> float:
     if first_settled == len(after):
         return float("inf")
     return float(times[after[first_settled]] - change_time)
-
-
-def dataset_samples(dataset) -> list[Sample]:
-    """The dataset as time-ordered input samples (heading wrapped, as a compass gives it)."""
-    heading = dataset.meta.get("wrapped_heading", dataset.heading)
-    return [
-        Sample(float(t), role, float(v))
-        for i, t in enumerate(dataset.time)
-        for role, v in (("rudder", dataset.rudder[i]), ("heading", heading[i]), ("yaw_rate", dataset.yaw_rate[i]))
-    ]
 
 
 def online_trace(method: str, samples) -> tuple[np.ndarray, np.ndarray, dict]:

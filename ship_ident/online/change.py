@@ -43,6 +43,7 @@ turn with the rudder held gives K = r / delta alone).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from dataclasses import replace
@@ -108,6 +109,28 @@ def block_squared_errors(structure: Structure, params: dict, dataset: Dataset, b
             a, b = blocks[i]
             squared[i] = (r[a:b] - dataset.yaw_rate[a:b]) ** 2
     return squared
+
+
+def largest_newest_median(values: np.ndarray, shortest: int) -> float:
+    """The largest median of the newest k ``values`` over k from ``shortest`` to all of them, the
+    newest values sorted once and one more inserted per k (not a median of each afresh). A median
+    over a NaN is NaN and never the largest: only the newest values up to the newest NaN count (NaN
+    when they are fewer than ``shortest``)."""
+    newest = values[::-1]
+    lost = np.flatnonzero(np.isnan(newest))
+    if len(lost):
+        if lost[0] < shortest:
+            return math.nan
+        newest = newest[: lost[0]]
+    newest = newest.tolist()
+    ordered = sorted(newest[: shortest - 1])
+    largest = -math.inf
+    for k in range(shortest, len(newest) + 1):
+        bisect.insort(ordered, newest[k - 1])
+        middle = k // 2
+        median = ordered[middle] if k % 2 else (ordered[middle - 1] + ordered[middle]) / 2
+        largest = max(largest, median)
+    return largest
 
 
 def block_errors(structure: Structure, params: dict, dataset: Dataset, blocks: tuple, lead: int = 0) -> np.ndarray:
@@ -231,8 +254,7 @@ class ChangeDetector:
             return math.nan
         lead = int(round(self.length / dataset.sample_time))
         (squared,) = block_squared_errors(structure, reference[1], dataset, ((stop - m, stop),), lead)
-        robust = max(np.median(squared[-k:]) for k in range(MIN_SHORT_SAMPLES, m + 1)) / MEDIAN_OF_CHI2_1
-        return float(robust) / reference[2]
+        return largest_newest_median(squared, MIN_SHORT_SAMPLES) / MEDIAN_OF_CHI2_1 / reference[2]
 
     def test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
         """The change test of a refit: the newest block's error against the usual level, and where it changed.

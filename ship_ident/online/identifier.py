@@ -27,9 +27,7 @@ from __future__ import annotations
 import math
 import threading
 import time as wallclock
-from collections import deque
 from dataclasses import dataclass, field, replace
-from itertools import chain
 
 import numpy as np
 
@@ -51,6 +49,7 @@ from .samples import ROLES, Sample
 from .trust import TrustPolicy
 from .uncertainty import EstimateScatter, along_the_damping, first_order_valley
 from .verdicts import FOLLOWED, LAST_GOOD, Verdict
+from .window import SampleWindow
 from .window_fit import fit_window
 
 OK, WARN, ERROR = 0, 1, 2
@@ -180,7 +179,7 @@ class OnlineIdentifier:
         self._lock = threading.Lock()
         self._config = config.validate()
         cap = config.max_window_samples
-        self._window = {role: deque(maxlen=cap) for role in ROLES}
+        self._window = {role: SampleWindow(cap) for role in ROLES}
         self._newest = {role: -math.inf for role in ROLES}  # s, last accepted stamp per role
         self._latest_time = -math.inf  # s, newest stamp or clock reading seen
         self._next_due: float | None = None
@@ -244,7 +243,7 @@ class OnlineIdentifier:
             outcome = self._check(sample)
             self.counts[outcome] += 1
             if outcome == "accepted":
-                self._window[sample.role].append((sample.time, sample.value))
+                self._window[sample.role].append(sample.time, sample.value)
                 self._newest[sample.role] = sample.time
                 self._latest_time = max(self._latest_time, sample.time)
             return outcome
@@ -370,9 +369,9 @@ class OnlineIdentifier:
             step = config.refit_period / WATCHES_PER_REFIT  # on a grid: a timer's jitter skips none
             self._next_watch = self._next_watch + step if now - self._next_watch < step else now + step
             oldest = max(now - min(2 * config.change_test_length, config.window_length), self._window_floor)
-            series = {role: _as_array(self._window[role]) for role in ROLES}
+            series = {role: self._window[role].array(oldest) for role in ROLES}
         try:
-            dataset = _resample(config, {role: s[s[:, 0] >= oldest] for role, s in series.items()})
+            dataset = _resample(config, series)
             ratio, changed_at = self._change.quick_test(config.structure(), dataset)
         except (DataError, StructureError, ValueError):
             return False
@@ -402,8 +401,8 @@ class OnlineIdentifier:
             self._observe_clock(now)  # after: a clock jump restarts the schedule from now
             config = self._config
             for role in ROLES:
-                self._prune(self._window[role], max(now - config.window_length, self._window_floor))
-            series = {role: _as_array(self._window[role]) for role in ROLES}
+                self._window[role].prune(max(now - config.window_length, self._window_floor))
+            series = {role: self._window[role].array() for role in ROLES}
             full = [role for role in ROLES if len(self._window[role]) == config.max_window_samples]
             newest = dict(self._newest)
             counts = dict(self.counts)
@@ -449,13 +448,8 @@ class OnlineIdentifier:
         with self._lock:
             config = self._config
             oldest = max(now - config.window_length, self._window_floor)
-            series = {role: _as_array(self._window[role]) for role in ROLES}
-        return _resample(config, {role: s[s[:, 0] >= oldest] for role, s in series.items()})
-
-    @staticmethod
-    def _prune(window: deque, oldest: float) -> None:
-        while window and window[0][0] < oldest:
-            window.popleft()
+            series = {role: self._window[role].array(oldest) for role in ROLES}
+        return _resample(config, series)
 
     def _fit(self, config: OnlineConfig, series: dict, last_good, record: RefitRecord) -> None:
         """Fit the window's ``series``: the full fit, or after a change the gain follow (``gain_follow``)
@@ -468,6 +462,9 @@ class OnlineIdentifier:
         structure = config.structure()
         if last_good is not None and self._change_note is None:
             dataset = self._test_for_change(config, structure, dataset, record)
+        if not dataset.n_samples:  # the inputs' samples never meet on one grid (gaps), or a change restarted it
+            record.report(Verdict("refit_failed", "window_unusable", {"error": "no sample time has all inputs"}))
+            return
         if self._change_note is not None and last_good is not None:
             if dataset.duration >= config.min_window_length - 0.5 * config.sample_time:
                 self._full_fit(config, structure, dataset, last_good, record)
@@ -634,11 +631,6 @@ def _resample(config: OnlineConfig, series: dict) -> Dataset:
     when ``speed_topic`` is set."""
     roles = [r for r in ROLES if r != "speed" or config.speed_topic]
     return resample_series({r: (series[r][:, 0], series[r][:, 1]) for r in roles}, config.sample_time, config.gap)
-
-
-def _as_array(window: deque) -> np.ndarray:
-    """The (time, value) pairs of a window as an (n, 2) array (twice as fast as np.array on tuples)."""
-    return np.fromiter(chain.from_iterable(window), dtype=float, count=2 * len(window)).reshape(-1, 2)
 
 
 def _short_test(config: OnlineConfig) -> float:

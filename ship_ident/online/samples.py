@@ -38,3 +38,25 @@ class Sample:
     time: float
     role: str
     value: float
+
+
+def dataset_samples(dataset) -> list[Sample]:
+    """A recording as the node would receive it: time-ordered rudder, heading and yaw-rate samples.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        A uniformly sampled recording (s, rad, rad/s); its ``wrapped_heading`` when it has one
+        (the heading wrapped, as a compass gives it).
+
+    Returns
+    -------
+    list of Sample
+        Per sample time, the rudder, heading and yaw-rate samples, oldest first.
+    """
+    heading = dataset.meta.get("wrapped_heading", dataset.heading)
+    return [
+        Sample(float(t), role, float(v))
+        for i, t in enumerate(dataset.time)
+        for role, v in (("rudder", dataset.rudder[i]), ("heading", heading[i]), ("yaw_rate", dataset.yaw_rate[i]))
+    ]

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from itertools import chain
 
 import numpy as np
 
@@ -67,6 +68,10 @@ class EstimateScatter:
 
     def __init__(self):
         self.recent = deque(maxlen=SCATTER_PAIRS)  # accepted estimates (estimator's errors), oldest first
+        # for each recent estimate, its pair rows with each later one ({parameter: (d^2 / U, 2 / U)}):
+        # a pair's rows never change, so a new estimate adds only its own pairs
+        self._rows = deque(maxlen=SCATTER_PAIRS)
+        self._newest = (None, [])  # the estimate components() last saw and its rows with the recent ones
 
     def add(self, estimate) -> None:
         """Enter an accepted estimate (with the estimator's own errors) into the recent ones.
@@ -76,11 +81,20 @@ class EstimateScatter:
         estimate : Estimate
             The accepted estimate.
         """
+        seen, rows = self._newest
+        if seen is not estimate:
+            rows = [_pair_rows(a, estimate) for a in self.recent]
+        for earlier, row in zip(self._rows, rows):
+            earlier.append(row)
         self.recent.append(estimate)
+        self._rows.append([])
+        self._newest = (None, [])
 
     def forget(self) -> None:
         """Drop the recent estimates (a change of the vessel or of the model: they scatter about other values)."""
         self.recent.clear()
+        self._rows.clear()
+        self._newest = (None, [])
 
     def components(self, estimate) -> dict:
         """The drift and own-error components of the scatter of the recent estimates and this one.
@@ -96,18 +110,14 @@ class EstimateScatter:
             {parameter: (phi^2 >= 1, sigma^2 >= 0)}: the drift's variance factor (dimensionless) and
             each fit's own error variance (the parameter's unit squared).
         """
-        chain_ = list(self.recent) + [estimate]
-        pairs = {name: [] for name in estimate.parameters}  # (d^2 / U, 2 / U)
-        for i, a in enumerate(chain_):
-            for b in chain_[i + 1 :]:
-                (a_shares, a_time), (b_shares, b_time) = _shared_shares(a, b), _shared_shares(b, a)
+        newest = [_pair_rows(a, estimate) for a in self.recent]
+        self._newest = (estimate, newest)
+        pairs = {name: [] for name in estimate.parameters}  # (d^2 / U, 2 / U), pairs in the order of the chain
+        for later, new in zip(self._rows, newest):
+            for row in chain(later, (new,)):
                 for name, rows in pairs.items():
-                    va, vb = a.std_errors.get(name, 0.0) ** 2, b.std_errors.get(name, 0.0) ** 2
-                    if va + vb > 0 and math.isfinite(va + vb) and name in a.parameters:
-                        ia, ib = a_shares.get(name, a_time), b_shares.get(name, b_time)
-                        apart = va * (1 - ia) + vb * (1 - ib) + (math.sqrt(va * ia) - math.sqrt(vb * ib)) ** 2
-                        unit = max(apart, MIN_FRESH_SHARE * (va + vb))
-                        rows.append(((b.parameters[name] - a.parameters[name]) ** 2 / unit, 2.0 / unit))
+                    if name in row:
+                        rows.append(row[name])
         return {name: _drift_and_own_error(rows) for name, rows in pairs.items()}
 
     def honest(self, estimate) -> dict:
@@ -129,6 +139,22 @@ class EstimateScatter:
             phi_square, sigma_square = components.get(name, (1.0, 0.0))
             honest[name] = math.sqrt(phi_square * std**2 + sigma_square)
         return honest
+
+
+def _pair_rows(a, b) -> dict:
+    """{parameter: (d^2 / U, 2 / U)} of the estimates ``a`` (the older) and ``b``: their squared
+    difference d^2 over the variance U their fresh shares give it (see ``EstimateScatter``), and
+    2 / U; parameters with no finite, positive joint variance have none."""
+    (a_shares, a_time), (b_shares, b_time) = _shared_shares(a, b), _shared_shares(b, a)
+    rows = {}
+    for name, value in a.parameters.items():
+        va, vb = a.std_errors.get(name, 0.0) ** 2, b.std_errors.get(name, 0.0) ** 2
+        if va + vb > 0 and math.isfinite(va + vb) and name in b.parameters:
+            ia, ib = a_shares.get(name, a_time), b_shares.get(name, b_time)
+            apart = va * (1 - ia) + vb * (1 - ib) + (math.sqrt(va * ia) - math.sqrt(vb * ib)) ** 2
+            unit = max(apart, MIN_FRESH_SHARE * (va + vb))
+            rows[name] = ((b.parameters[name] - value) ** 2 / unit, 2.0 / unit)
+    return rows
 
 
 def _shared_shares(a, b) -> tuple[dict, float]:

@@ -24,7 +24,10 @@ the node adds (and may remove again) an effect itself, through its own
 Once per refit the ROS graph is checked for publishers of another message
 type on the input topics (DDS never delivers those; reported). With
 ``log_directory`` set, every accepted estimate is appended to rotated
-JSON-lines files there, so the history survives a restart.
+JSON-lines files there, so the history survives a restart. At start a child
+process at low priority compiles the refit's numeric kernels into numba's cache
+(``online.warmup``; after an install the first time, later it finds them there)
+while the window fills.
 
 Run: ``identifier_node --ros-args --params-file config/ship_ident.yaml``
 (or ``python -m ship_ident.node``). SIGINT and SIGTERM stop it cleanly.
@@ -43,6 +46,7 @@ import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import fields
+from multiprocessing import get_context
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -57,7 +61,7 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
-from ..diagnosis.onboard import MIN_WINDOW_S, DiagnosisWorker, OnlineDiagnosis
+from ..diagnosis.onboard import MIN_WINDOW_S, NICENESS, DiagnosisWorker, OnlineDiagnosis
 from ..io.files import FLOAT64, IMU, Sample, imu_samples
 from ..io.jsonio import dumps_json
 from ..online.config import NODE_PARAMETERS, ConfigError, NodeSettings, OnlineConfig, spec, specs
@@ -73,6 +77,7 @@ from ..online.outputs import (
     gain_band,
     trusted_parameters,
 )
+from ..online.warmup import warm_up_quietly
 
 NODE_NAME = "ship_ident"
 # The schedule is checked this many times per refit period, and between refits the newest data are
@@ -174,6 +179,11 @@ class IdentifierNode(Node):
         self._type_problems = ""  # sentence about wrong-type publishers on the inputs, if any
         self._timer = None
         self._start_timer(config.refit_period)
+        # the kernels a refit calls compiled into numba's cache (or found there) while the window fills, by a
+        # child at low priority: the node's own refits keep the CPU and the GIL, and its first one loads them
+        self._warm_up = get_context("spawn").Process(target=warm_up_quietly, name="ship_ident warm-up", daemon=True)
+        self._warm_up.start()
+        os.setpriority(os.PRIO_PROCESS, self._warm_up.pid, NICENESS)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(
@@ -396,6 +406,9 @@ class IdentifierNode(Node):
         self.destroy_timer(self._timer)
         self._worker.shutdown(wait=True, cancel_futures=True)
         self.diagnosis.close()
+        if self._warm_up.is_alive():
+            self._warm_up.terminate()
+            self._warm_up.join(timeout=5.0)
 
 
 def multi_array(names, values) -> Float64MultiArray:

@@ -1,0 +1,62 @@
+"""Compile the numeric kernels of a refit before the first refit needs them.
+
+The free-run integrator and the innovation filter are numba kernels compiled on their first call
+and kept in numba's on-disk cache (``cache=True``, next to the modules, or in ``NUMBA_CACHE_DIR``).
+Right after an install that cache is empty, and a boat's first refit would spend about 13 s
+compiling. ``warm_up`` runs the online core, as configured, over a short simulated manoeuvre: every
+kernel a refit, a change watch and a profile of the cost calls is compiled and cached with the very
+argument types they get on board. With the cache filled, it loads them in well under a second.
+
+The node runs it at start in a child process at low priority (``warm_up_quietly``; the window
+fills meanwhile, and the node's first refit loads what it cached); ``make setup`` runs it once
+after installing (``python -m ship_ident.online.warmup``).
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from dataclasses import replace
+
+from ..model.simulator import simulate
+from .config import OnlineConfig
+from .identifier import OnlineIdentifier, run_schedule
+from .samples import dataset_samples
+
+# s of simulated data: a first fit at WARM_UP_FIRST_FIT s, then refits (their change watches between
+# them) on a growing window
+WARM_UP_SECONDS = 40.0
+WARM_UP_FIRST_FIT = 25.0
+
+
+def warm_up(config: OnlineConfig | None = None) -> float:
+    """Run the online core with ``config`` (the default configuration when None) over
+    WARM_UP_SECONDS of a simulated mixed manoeuvre, sampled at its ``sample_time``, so that the
+    kernels its refits call are compiled (or loaded from numba's cache); returns the wall time
+    it took (s). Nothing of it is kept: the caller's identifier is not touched."""
+    started = time.perf_counter()
+    config = replace(
+        config or OnlineConfig(),
+        window_length=WARM_UP_SECONDS,
+        min_window_length=WARM_UP_FIRST_FIT,
+        diagnosis_period=0.0,
+        speed_topic="",
+    ).validate()
+    dataset = simulate("mixed", duration=WARM_UP_SECONDS, sample_time=config.sample_time, seed=0).dataset
+    for _ in run_schedule(OnlineIdentifier(config), dataset_samples(dataset)):
+        pass
+    return time.perf_counter() - started
+
+
+def warm_up_quietly() -> None:
+    """The node's warm-up child: ``warm_up`` with the default configuration, deaf to Ctrl-C.
+
+    The kernels' argument types do not depend on the configuration. A terminal's Ctrl-C reaches the
+    whole process group: the child leaves it to the node, which ends it.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    warm_up()
+
+
+if __name__ == "__main__":
+    print(f"ship_ident refit kernels ready (compiled, or loaded from the cache) in {warm_up():.1f} s")

@@ -348,3 +348,23 @@ def test_the_true_model_of_a_slow_turning_usv_free_runs_at_the_noise_from_window
     print(np.degrees(run.fit["rmse_heading"]), run.fit["rmse_yaw_rate"] / noise)
     assert run.fit["rmse_yaw_rate"] < 1.05 * noise
     assert np.degrees(run.fit["rmse_heading"]) < 0.3
+
+
+def test_a_steering_delay_hidden_by_a_rudder_lead_on_a_usv_is_fitted():
+    """A USV whose 1.04 s steering delay and 2.26 s rudder lead T3 cancel into a response with
+    neither (the model without the delay fits T3 = 0 and a T1 of 2.4 s against 3.8 s): the search
+    from the model without the delay, whose shooting intervals' states absorb the shift, stopped at
+    tau 0.1 s; from the delay profile's best start by the training free runs it finds the hull."""
+    from ship_ident.diagnose import DEFAULT_METHOD, split
+    from ship_ident.simulator import Vessel
+
+    truth = dict(K=0.359, T1=3.78, T2=0.311, T3=2.26, tau=1.04)
+    vessel = Vessel("usv with a steering delay", "a USV whose rudder lead hides its steering delay", truth, speed=3.0)
+    sim = simulate("mixed", vessel, effects=("rudder_delay",), duration=DURATION, seed=1, parameters=truth)
+    training, _ = split(sim.dataset)
+    base = _fit(Structure("nomoto2", ()), training, DEFAULT_METHOD)
+    fit = _fit(Structure("nomoto2", ("rudder_delay",)), training, DEFAULT_METHOD, base.parameters)
+    print(base.parameters, fit.parameters)
+    assert base.parameters["T3"] < 0.1
+    for name in ("tau", "T1", "T3"):
+        assert fit.parameters[name] == pytest.approx(truth[name], rel=0.1)

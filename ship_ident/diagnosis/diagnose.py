@@ -382,6 +382,7 @@ def free_run(structure: Structure, parameters: dict, dataset: Dataset) -> FreeRu
 
 
 START_STATE_STEP = 1e-3  # rad/s (yaw rate) and rad/s^2 (yaw acceleration): finite-difference steps of the start
+START_STATE_FAST_POLES = 3.0  # the start is fitted over this many fast time constants (at most the mean delay)
 START_STATE_RCOND = 1e-3  # a start direction less sensitive than this share of the largest keeps its measured value
 
 
@@ -389,8 +390,12 @@ def fitted_start_states(structure: Structure, parameters: dict, dataset: Dataset
     """Each free-run window's start state for ``structure`` at ``parameters``: heading (rad), the
     hull's yaw rate (rad/s) and yaw acceleration (rad/s^2), starting from the measured state
     (``window_start_states``, the gyro bias removed) and fitted so the model's yaw rate follows the
-    measured one over the window's first slow time constant (``effects.yaw_time_constant``, at least
-    five samples): one Gauss-Newton step of a linear least-squares problem in the two rates.
+    measured one over the window's first ``START_STATE_FAST_POLES`` fast time constants (where an
+    error of the start's yaw acceleration shows; at most the mean delay ``effects.yaw_time_constant``,
+    at least the smoothing window and five samples): one Gauss-Newton step of a linear least-squares
+    problem in the two rates. A longer span would let a wrong model follow the first part of every
+    window (a slow ship's base fit with T1 195 s, fitted over it, hid 85 % of a gyro bias's
+    yaw-rate error).
 
     A second-order hull's memory at the start is T1 T2 r' + (T1 + T2) r - K T3 delta: an error of
     0.01 rad/s^2 in the yaw acceleration there is a yaw-rate error of T1 T2 / (T1 + T2) times it,
@@ -401,7 +406,8 @@ def fitted_start_states(structure: Structure, parameters: dict, dataset: Dataset
     bias = structure.yaw_rate_bias(parameters)  # the gyro reads the hull's yaw rate plus its bias
     measured = [(psi0, r0 - bias, r_dot0) for psi0, r0, r_dot0 in window_start_states(dataset)]
     h = dataset.sample_time
-    span = max(5, int(round(yaw_time_constant(parameters) / h)))
+    span_s = min(START_STATE_FAST_POLES * structure.fastest_time_constant(parameters), yaw_time_constant(parameters))
+    span = max(5, int(round(max(span_s, smoothing_window(dataset.noise_std("yaw_rate"))) / h)))
     spans = [(a, min(b, a + span)) for a, b in dataset.segments]
     first = replace(dataset, segments=spans)
     steps = np.diag([0.0, START_STATE_STEP, START_STATE_STEP])
@@ -804,7 +810,7 @@ def from_best_profile_start(estimator, structure: Structure, estimate: Estimate,
         value = free_run(structure, parameters, cut).fit["rmse_yaw_rate"]
         return float(value) if np.isfinite(value) else np.inf
 
-    best = min(starts, key=error)
+    best = min((dict(estimate.parameters, **start) for start in starts), key=error)  # fixed ones (U_ref) kept
     reached = error(estimate.parameters)
     if error(best) >= reached:
         return estimate

@@ -402,7 +402,23 @@ def fitted_start_states(structure: Structure, parameters: dict, dataset: Dataset
     0.7 deg/s on a USV with T1 7 s and T2 1.5 s, which no smoothing of the measured yaw rate near a
     rudder step avoids. Every model is given the start that suits it on the same first samples, as
     a model's initial state is a nuisance of the output-error problem; directions the first samples
-    do not determine (``START_STATE_RCOND``: a fast pole's acceleration) keep the measured value."""
+    do not determine (``START_STATE_RCOND``: a fast pole's acceleration) keep the measured value.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model run free.
+    parameters : dict
+        Its parameters (SI units).
+    dataset : Dataset
+        The data; each segment is one free-run window.
+
+    Returns
+    -------
+    list of tuple
+        (heading rad, yaw rate rad/s, yaw acceleration rad/s^2) of the hull at each segment's
+        first sample, in the order of ``dataset.segments``.
+    """
     bias = structure.yaw_rate_bias(parameters)  # the gyro reads the hull's yaw rate plus its bias
     measured = [(psi0, r0 - bias, r_dot0) for psi0, r0, r_dot0 in window_start_states(dataset)]
     h = dataset.sample_time
@@ -441,7 +457,19 @@ def window_start_states(dataset: Dataset) -> list[tuple[float, float, float]]:
     A model with a faster response forgets a wrong start sooner, so such starts ranked wrong models
     with fast poles above the true one (a USV with a hidden cubic damping, T1 7 s: the true model at
     its known parameters missed the yaw rate by 1.3 deg/s over the first 6 s of windows starting in
-    a turn, and its held-out heading error was three times that of a course_instability fit)."""
+    a turn, and its held-out heading error was three times that of a course_instability fit).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data; each segment is one free-run window.
+
+    Returns
+    -------
+    list of tuple
+        (heading rad, measured yaw rate rad/s, yaw acceleration rad/s^2) at each segment's first
+        sample; a window in a record shorter than five samples keeps its first sample and r' = 0.
+    """
     h = dataset.sample_time
     half = max(1, int(round(0.5 * smoothing_window(dataset.noise_std("yaw_rate")) / h)))
     records, states = [], []
@@ -801,7 +829,26 @@ def from_best_profile_start(estimator, structure: Structure, estimate: Estimate,
     shows, while a free run over many time constants does not. A USV with a 1.0 s steering delay
     and a rudder lead T3 of 2.3 s (which cancel into a response without either) went on from the
     model without the delay and stopped at tau 0.1 s, T3 0: 2.6 times the yaw-rate error of the
-    profile's start at tau 1.07 s, from which the search finds the truth."""
+    profile's start at tau 1.07 s, from which the search finds the truth.
+
+    Parameters
+    ----------
+    estimator : Estimator
+        The iterative estimator that fitted ``estimate``.
+    structure : Structure
+        The model with the effect.
+    estimate : Estimate
+        Its fit from all starts.
+    training : Dataset
+        The training data.
+    starts : list of dict
+        The effect's starting points (SI units); parameters they lack are ``estimate``'s.
+
+    Returns
+    -------
+    Estimate
+        ``estimate``, or the search from the best start when it runs closer to the training data.
+    """
     if not starts:
         return estimate
     cut = windows(training, held_out_window(estimate.parameters, covered(training)))

@@ -37,8 +37,17 @@ def _data(effects, parameters=None, seed=1):
 @pytest.mark.slow
 @pytest.mark.parametrize("effect", HIDDEN)
 def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
-    dataset = _data((effect,), HIDDEN[effect])
-    result = diagnose(dataset, "nomoto2", (), workers=1)
+    """Each effect hidden on seed001: named first, significant, with at least 90 % of the gain of the
+    true model at its known parameters, and half of the error removed wherever the true model
+    removes half (its 0.5 s rudder delay, T1 1.1 s, removes a quarter of the yaw-rate error and
+    7 % of the heading's: with every window started from the hull's fitted state the model
+    without the delay follows the heading as closely)."""
+    sim = simulate("random", "seed001", effects=(effect,), duration=DURATION, seed=1, parameters=HIDDEN[effect] or None)
+    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
+    truth = free_run(result.structure.with_effects((effect,)), sim.truth, result.held_out).fit
+    true_gain = max(
+        1 - truth[f"rmse_{signal}"] / result.run.fit[f"rmse_{signal}"] for signal in ("heading", "yaw_rate")
+    )
     top = result.candidates[0]
     figures = {
         c.effect: (round(c.improvement_heading, 2), round(c.improvement_yaw_rate, 2), c.significant)
@@ -48,8 +57,9 @@ def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
     assert result.verdict == "missing_effect", figures
     assert top.training_gain >= 0.02  # it also shows in free runs on the data it was fitted on
     assert top.effect == effect and top.significant, figures
+    assert top.improvement >= 0.9 * true_gain, (true_gain, figures)
     key = "improvement_yaw_rate" if effect == "gyro_bias" else "improvement_heading"
-    assert getattr(top, key) >= 0.5, figures
+    assert getattr(top, key) >= 0.5 or true_gain < 0.5, (true_gain, figures)
 
 
 @pytest.mark.slow

@@ -392,10 +392,10 @@ def fitted_start_states(structure: Structure, parameters: dict, dataset: Dataset
     (``window_start_states``, the gyro bias removed) and fitted so the model's yaw rate follows the
     measured one over the window's first ``START_STATE_FAST_POLES`` fast time constants (where an
     error of the start's yaw acceleration shows; at most the mean delay ``effects.yaw_time_constant``,
-    at least the smoothing window and five samples): one Gauss-Newton step of a linear least-squares
-    problem in the two rates. A longer span would let a wrong model follow the first part of every
-    window (a slow ship's base fit with T1 195 s, fitted over it, hid 85 % of a gyro bias's
-    yaw-rate error).
+    at least the smoothing window and five samples; a first-order hull's yaw rate over the smoothing
+    window alone): one Gauss-Newton step of a linear least-squares problem in the two rates. A
+    longer span would let a wrong model follow the first part of every window (a slow ship's base
+    fit with T1 195 s, fitted over it, hid 85 % of a gyro bias's yaw-rate error).
 
     A second-order hull's memory at the start is T1 T2 r' + (T1 + T2) r - K T3 delta: an error of
     0.01 rad/s^2 in the yaw acceleration there is a yaw-rate error of T1 T2 / (T1 + T2) times it,
@@ -422,7 +422,10 @@ def fitted_start_states(structure: Structure, parameters: dict, dataset: Dataset
     bias = structure.yaw_rate_bias(parameters)  # the gyro reads the hull's yaw rate plus its bias
     measured = [(psi0, r0 - bias, r_dot0) for psi0, r0, r_dot0 in window_start_states(dataset)]
     h = dataset.sample_time
-    span_s = min(START_STATE_FAST_POLES * structure.fastest_time_constant(parameters), yaw_time_constant(parameters))
+    span_s = 0.0  # a first-order hull's only state is its yaw rate, which the local fit measures
+    if structure.order == 2:
+        fast = structure.fastest_time_constant(parameters)
+        span_s = min(START_STATE_FAST_POLES * fast, yaw_time_constant(parameters))
     span = max(5, int(round(max(span_s, smoothing_window(dataset.noise_std("yaw_rate"))) / h)))
     spans = [(a, min(b, a + span)) for a, b in dataset.segments]
     first = replace(dataset, segments=spans)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from ship_ident import cli
-from ship_ident.diagnosis.diagnose import _fit, diagnose, extrapolation, free_run
+from ship_ident.diagnosis.diagnose import DEFAULT_METHOD, _fit, diagnose, extrapolation, free_run, split, windows
 from ship_ident.model.dataset import join_recordings
 from ship_ident.model.effects import EFFECTS
-from ship_ident.model.simulator import VESSELS, simulate
+from ship_ident.model.simulator import VESSELS, Vessel, simulate
 from ship_ident.model.structure import Structure, nomoto_parameters
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -345,9 +345,6 @@ def test_the_true_model_of_a_slow_turning_usv_free_runs_at_the_noise_from_window
     noise and the heading within 0.3 deg (measured: 0.22 deg; started from the measured yaw rate
     with r' = 0: 2.2 deg, and a wrong damping law's fit, whose faster pole forgets a wrong start
     sooner, ranked before the true one)."""
-    from ship_ident.diagnose import split, windows
-    from ship_ident.simulator import Vessel
-
     truth = dict(K=0.589, T1=7.12, T2=1.5, T3=1.36, alpha=12.8)
     vessel = Vessel("slow-turning usv", "a USV with a long slow pole and a cubic yaw damping", truth, speed=3.0)
     sim = simulate("mixed", vessel, effects=("cubic_yaw",), duration=DURATION, seed=5, parameters=truth)
@@ -365,9 +362,6 @@ def test_a_steering_delay_hidden_by_a_rudder_lead_on_a_usv_is_fitted():
     neither (the model without the delay fits T3 = 0 and a T1 of 2.4 s against 3.8 s): the search
     from the model without the delay, whose shooting intervals' states absorb the shift, stopped at
     tau 0.1 s; from the delay profile's best start by the training free runs it finds the hull."""
-    from ship_ident.diagnose import DEFAULT_METHOD, split
-    from ship_ident.simulator import Vessel
-
     truth = dict(K=0.359, T1=3.78, T2=0.311, T3=2.26, tau=1.04)
     vessel = Vessel("usv with a steering delay", "a USV whose rudder lead hides its steering delay", truth, speed=3.0)
     sim = simulate("mixed", vessel, effects=("rudder_delay",), duration=DURATION, seed=1, parameters=truth)
@@ -385,9 +379,6 @@ def test_a_long_steering_delay_with_a_rudder_lead_on_a_usv_is_fitted_down_to_the
     tau 0.9 s, T3 0 and 1.7 noise levels, and no start of the delay profile (regression starts with
     K 10 % low) ran closer to the training data than that. A fit left above the noise also searches
     from the profile's best start: it ends at the noise, the delay traded against the lead."""
-    from ship_ident.diagnose import DEFAULT_METHOD, split
-    from ship_ident.simulator import Vessel
-
     truth = dict(K=0.341, T1=7.19, T2=0.853, T3=1.85, tau=1.66)
     vessel = Vessel("usv with a long steering delay", "a USV with a steering delay and a rudder lead", truth, speed=3.0)
     sim = simulate("mixed", vessel, effects=("rudder_delay",), duration=DURATION, seed=1, parameters=truth)

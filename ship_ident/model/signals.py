@@ -98,7 +98,18 @@ def despike(values: np.ndarray, floor: float, window: int = 7, threshold: float 
 
 
 def smoothing_window(yaw_rate_noise: float) -> float:
-    """Savitzky-Golay window (s): 0.7 s on clean data, widening to 3 s at 0.2 deg/s yaw-rate noise."""
+    """Savitzky-Golay window: 0.7 s on clean data, widening to 3 s at 0.2 deg/s yaw-rate noise.
+
+    Parameters
+    ----------
+    yaw_rate_noise : float
+        White-noise standard deviation of the measured yaw rate (rad/s).
+
+    Returns
+    -------
+    float
+        The window's length (s).
+    """
     return float(0.7 + 2.3 * min(1.0, yaw_rate_noise / np.radians(0.2)))
 
 

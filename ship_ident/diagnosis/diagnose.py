@@ -1533,14 +1533,7 @@ def diagnose(
         structure.check_data(validation)
         training, rest = dataset, validation
     say(f"fitting {structure.label()} by {method} on {training.duration:.0f} s, holding out {rest.duration:.0f} s")
-    fits = []  # the effects are added one at a time, each fit also starting from the last
-    for count in range(len(structure.effect_names) + 1):
-        nested = fits[-1].parameters if fits and isinstance(fits[-1], Estimate) else None
-        fits.append(_refit_task((structure.with_effects(structure.effect_names[:count]), training, method, nested)))
-    estimate = fits[-1]
-    if isinstance(estimate, str):
-        raise DataError(f"cannot fit {structure.label()}: {estimate}")
-    before = fits[-2] if len(fits) > 1 and isinstance(fits[-2], Estimate) else None
+    estimate, before = _fit_nested(structure, training, method)
     window = held_out_window(estimate.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
     held_out = windows(rest, window)
     before_run = free_run(before.structure, before.parameters, held_out) if before else None
@@ -1559,70 +1552,20 @@ def diagnose(
         tasks = [(structure.adding(n), training, method, base.parameters) for n in fittable]
         return dict(zip(fittable, _map(tasks, workers)))
 
-    refits = refit_candidates(estimate)
-    rebased = _rebase(structure, training, method, estimate, list(refits.values()))
-    if rebased is not None:
-        say(
-            f"the candidates' fits found a better start for {structure.label()} itself: refitted "
-            f"(training fit residual {estimate.info['cost_ratio']:.2f} -> {rebased.info['cost_ratio']:.2f} "
-            "noise levels); refitting the candidates from it"
-        )
-        estimate = rebased
-        refits = refit_candidates(estimate)  # each candidate extends the model it is judged against
     fitted_windows = windows(training, window)
-    fitted_run = free_run(structure, estimate.parameters, fitted_windows)
-    equivalent = _equivalent_base(structure, training, method, refits.values(), fitted_windows, fitted_run)
-    if equivalent is not None:
-        say(
-            f"a candidate is {structure.label()} itself in other parameters, and runs closer to the "
-            "training data: the model is refitted from it, and the candidates from the model"
-        )
-        estimate = equivalent
-        refits = refit_candidates(estimate)
-        fitted_run = free_run(structure, estimate.parameters, fitted_windows)
+    estimate, refits, fitted_run = _settle(structure, training, method, estimate, refit_candidates, fitted_windows, say)
     # the model the candidates are judged against is settled: its held-out run and residual evidence
     run = free_run(structure, estimate.parameters, held_out)
     context = residual_context(structure, estimate.parameters, dataset)
     evidences = {name: EFFECTS[name].evidence(context) for name in names}
     refits = {n: no_worse(r, training, method, estimate.parameters, fitted_windows) for n, r in refits.items()}
     refits = shared_fits(refits, training, method, fitted_windows)
-    candidates = [
-        judge(
-            n,
-            evidences[n],
-            held_out,
-            run,
-            refits.get(n, "the speed hardly varies in these data"),
-            fitted_windows,
-            fitted_run,
-        )
-        for n in names
-    ]
-    if validation is not None:
-        judge_across_manoeuvres(candidates)
-    if "low_excitation" in estimate.flags:  # the model itself is poorly determined: no gain is an effect
-        for c in candidates:
-            if c.significant:
-                c.significant = False
-                c.note = (
-                    "would be significant, but the training data excite the yaw too little "
-                    "(low_excitation) to tell an effect from the model's own scatter"
-                )
-    candidates.sort(key=ranking(candidates))
+    judged = (held_out, run, fitted_windows, fitted_run)
+    candidates = _judge_candidates(names, evidences, refits, judged, estimate, validation is not None)
     recommend_determined(candidates, estimate, training, held_out, run, fitted_windows, fitted_run, method)
     mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
-    tc = yaw_time_constant(estimate.parameters)
-    worst_window = float(np.clip(WORST_WINDOW_TIME_CONSTANTS * tc, *WORST_WINDOW_LIMITS_S))
-    if validation is None:
-        source = dataset.meta.get("source") or "the record"
-        parts = [
-            (training, [(f"{source} (training)", 0, training.n_samples)], False),
-            (rest, [(f"{source} (held out)", 0, rest.n_samples)], True),
-        ]
-    else:
-        parts = [(training, recordings(training, "training"), False), (rest, recordings(rest, "held-out"), True)]
-    worst = worst_segments(parts, structure, estimate.parameters, worst_window, before=before)
+    worst = _locate_failures(dataset, training, rest, validation is not None, structure, estimate, before)
     noise = {
         "heading": dataset.noise_std("heading"),
         "yaw_rate": dataset.noise_std("yaw_rate"),
@@ -1645,6 +1588,180 @@ def diagnose(
         evidences=evidences,
         training_windows=fitted_windows,
     )
+
+
+def _fit_nested(structure: Structure, training: Dataset, method: str) -> tuple[Estimate, Estimate | None]:
+    """The model fitted with its effects added one at a time, each fit also starting from the last.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model: a base model and its effects, in the order added.
+    training : Dataset
+        The training data (s, rad, rad/s).
+    method : str
+        The estimation method.
+
+    Returns
+    -------
+    estimate : Estimate
+        The fit of the whole model.
+    before : Estimate or None
+        The fit without the last effect (None without effects, or when it failed).
+
+    Raises
+    ------
+    DataError
+        When the whole model cannot be fitted.
+    """
+    fits = []
+    for count in range(len(structure.effect_names) + 1):
+        nested = fits[-1].parameters if fits and isinstance(fits[-1], Estimate) else None
+        fits.append(_refit_task((structure.with_effects(structure.effect_names[:count]), training, method, nested)))
+    estimate = fits[-1]
+    if isinstance(estimate, str):
+        raise DataError(f"cannot fit {structure.label()}: {estimate}")
+    before = fits[-2] if len(fits) > 1 and isinstance(fits[-2], Estimate) else None
+    return estimate, before
+
+
+def _settle(structure, training, method, estimate, refit_candidates, fitted_windows, say) -> tuple:
+    """The model the candidates are judged against, and the candidates refitted from it.
+
+    A candidate's fit may show the model a better start (``_rebase``), or be the model itself in
+    other parameters running closer to the training data (``_equivalent_base``): the model is then
+    refitted from it, and each candidate again from the model, since a candidate extends the model
+    it is judged against.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model.
+    training : Dataset
+        The training data.
+    method : str
+        The estimation method.
+    estimate : Estimate
+        The model's first fit.
+    refit_candidates : callable
+        Estimate -> {candidate name: its refit (Estimate) or why it failed (str)}.
+    fitted_windows : list
+        The training free-run windows.
+    say : callable
+        Receives one-line progress messages.
+
+    Returns
+    -------
+    estimate : Estimate
+        The settled fit of the model.
+    refits : dict
+        The candidates refitted from it.
+    fitted_run : list
+        The model's free runs on the training windows.
+    """
+    refits = refit_candidates(estimate)
+    rebased = _rebase(structure, training, method, estimate, list(refits.values()))
+    if rebased is not None:
+        say(
+            f"the candidates' fits found a better start for {structure.label()} itself: refitted "
+            f"(training fit residual {estimate.info['cost_ratio']:.2f} -> {rebased.info['cost_ratio']:.2f} "
+            "noise levels); refitting the candidates from it"
+        )
+        estimate = rebased
+        refits = refit_candidates(estimate)
+    fitted_run = free_run(structure, estimate.parameters, fitted_windows)
+    equivalent = _equivalent_base(structure, training, method, refits.values(), fitted_windows, fitted_run)
+    if equivalent is not None:
+        say(
+            f"a candidate is {structure.label()} itself in other parameters, and runs closer to the "
+            "training data: the model is refitted from it, and the candidates from the model"
+        )
+        estimate = equivalent
+        refits = refit_candidates(estimate)
+        fitted_run = free_run(structure, estimate.parameters, fitted_windows)
+    return estimate, refits, fitted_run
+
+
+def _judge_candidates(names, evidences, refits, judged, estimate, cross_manoeuvre: bool) -> list:
+    """Every candidate judged on the held-out free runs, and ranked.
+
+    Parameters
+    ----------
+    names : list of str
+        The candidate effects.
+    evidences : dict
+        Each candidate's residual evidence.
+    refits : dict
+        Each fittable candidate's refit (Estimate) or why it failed (str); a candidate missing
+        here needs a speed that hardly varies.
+    judged : tuple
+        (held-out windows, the model's held-out runs, training windows, the model's training runs).
+    estimate : Estimate
+        The model's fit: with ``low_excitation`` no gain is significant.
+    cross_manoeuvre : bool
+        Whether other recordings are held out (``judge_across_manoeuvres``).
+
+    Returns
+    -------
+    list of Candidate
+        The candidates, best first.
+    """
+    held_out, run, fitted_windows, fitted_run = judged
+    no_speed = "the speed hardly varies in these data"
+    candidates = [
+        judge(n, evidences[n], held_out, run, refits.get(n, no_speed), fitted_windows, fitted_run) for n in names
+    ]
+    if cross_manoeuvre:
+        judge_across_manoeuvres(candidates)
+    if "low_excitation" in estimate.flags:  # the model itself is poorly determined: no gain is an effect
+        for c in candidates:
+            if c.significant:
+                c.significant = False
+                c.note = (
+                    "would be significant, but the training data excite the yaw too little "
+                    "(low_excitation) to tell an effect from the model's own scatter"
+                )
+    candidates.sort(key=ranking(candidates))
+    return candidates
+
+
+def _locate_failures(dataset, training, rest, cross_manoeuvre: bool, structure, estimate, before) -> list:
+    """The worst segments of the model's free runs, on the training and the held-out data.
+
+    The segments are a few of the model's mean delays long (``WORST_WINDOW_TIME_CONSTANTS``), so a
+    segment spans one manoeuvre's response.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The whole record (its ``source`` names the segments).
+    training, rest : Dataset
+        The training and the held-out data.
+    cross_manoeuvre : bool
+        Whether ``rest`` is other recordings (each named by its own source).
+    structure : Structure
+        The model.
+    estimate : Estimate
+        Its fit.
+    before : Estimate or None
+        The fit without the last effect, for the error it had there.
+
+    Returns
+    -------
+    list
+        The worst segments (``worst_segments``).
+    """
+    tc = yaw_time_constant(estimate.parameters)
+    worst_window = float(np.clip(WORST_WINDOW_TIME_CONSTANTS * tc, *WORST_WINDOW_LIMITS_S))
+    if not cross_manoeuvre:
+        source = dataset.meta.get("source") or "the record"
+        parts = [
+            (training, [(f"{source} (training)", 0, training.n_samples)], False),
+            (rest, [(f"{source} (held out)", 0, rest.n_samples)], True),
+        ]
+    else:
+        parts = [(training, recordings(training, "training"), False), (rest, recordings(rest, "held-out"), True)]
+    return worst_segments(parts, structure, estimate.parameters, worst_window, before=before)
 
 
 def signal_table(diagnosis: Diagnosis) -> list[dict]:

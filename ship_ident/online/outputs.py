@@ -112,8 +112,9 @@ def diagnostic_status(record: RefitRecord, extra: dict | None = None) -> tuple[i
 
 
 def error_and_floor(diagnosis: dict | None) -> tuple[float, float] | None:
-    """The held-out free-run yaw-rate error of a finished diagnosis and its noise floor: the figures
-    its verdict is read from, those pooled since the model or vessel last changed
+    """The held-out free-run yaw-rate error of a finished diagnosis and its noise floor.
+
+    The figures its verdict is read from: those pooled since the model or vessel last changed
     (``diagnosis["pooled"]``), or the window's own while nothing is pooled yet. One window's error
     scatters about the floor by its fit's own scatter; the pooled one settles as the evidence grows.
 

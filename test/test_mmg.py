@@ -203,3 +203,12 @@ def test_generator_applies_only_where_a_benchmark_has_several(capsys):
     assert "--generator does not apply" in capsys.readouterr().err
     assert main(["bench", "hidden-effects", "--generator", "other"]) == 2
     assert "choose from ours, mmg, both" in capsys.readouterr().err
+
+
+def test_a_benchmarks_own_counts_apply_to_it_alone(capsys):
+    """``--mmg-trips``, ``--none-trips`` and ``--dds-trips`` are onboard-diagnosis's: elsewhere, or
+    negative, one line and exit code 2."""
+    assert main(["bench", "speed", "--mmg-trips", "3"]) == 2
+    assert capsys.readouterr().err.strip().endswith("--mmg-trips does not apply to speed")
+    assert main(["bench", "onboard-diagnosis", "--none-trips", "-1"]) == 2
+    assert "--none-trips must be >= 0, got -1" in capsys.readouterr().err

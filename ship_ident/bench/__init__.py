@@ -8,7 +8,9 @@ JSON-ready result; progress goes to stderr) and ``render(result) -> str``
 --plot-dir DIR``). A benchmark that can draw its recordings from several generators registers
 them (``generators``); its ``run`` then takes ``generator`` (``--generator NAME``).
 ``benchmarks()`` imports every module here, so adding a
-benchmark means adding one module and nothing else.
+benchmark means adding one module and nothing else. A benchmark with counts of its own (e.g. how
+many trips of a second kind to draw) registers them as ``options`` (``Option``: ``--flag N``);
+its ``run`` then takes each one given as a keyword.
 """
 
 from __future__ import annotations
@@ -23,6 +25,19 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class Option:
+    """A count a benchmark takes beside ``--count``: ``--{flag} N`` on the command line, ``run``'s
+    keyword ``flag`` with dashes as underscores; ``help`` says what it counts and its default."""
+
+    flag: str
+    help: str
+
+    @property
+    def keyword(self) -> str:
+        return self.flag.replace("-", "_")
+
+
+@dataclass(frozen=True)
 class Benchmark:
     name: str
     description: str
@@ -31,6 +46,7 @@ class Benchmark:
     plots: bool = False
     randomised: bool = False
     generators: tuple[str, ...] = ()  # the recordings' generators ``run`` takes as ``generator`` (the first: default)
+    options: tuple[Option, ...] = ()  # counts ``run`` takes beside ``count``
 
 
 _REGISTRY: dict[str, Benchmark] = {}
@@ -46,8 +62,9 @@ def register(
     plots: bool = False,
     randomised: bool = False,
     generators: tuple[str, ...] = (),
+    options: tuple[Option, ...] = (),
 ) -> None:
-    _REGISTRY[name] = Benchmark(name, description, run, render, plots, randomised, generators)
+    _REGISTRY[name] = Benchmark(name, description, run, render, plots, randomised, generators, options)
 
 
 def benchmarks() -> dict[str, Benchmark]:

@@ -116,12 +116,14 @@ def strength(effect: str, vessel, rng: np.random.Generator, answer: Response) ->
     raise ValueError(f"no strength for {effect!r}")
 
 
-def draw_case(seed: int, hidden: tuple[str, ...], duration: float | None = None, manoeuvres=MANOEUVRES):
-    """A vessel drawn from ``seed``, its manoeuvre (one of ``manoeuvres``) and its simulated record
-    of ``duration`` s (default ``DURATION_S`` of its kind) with ``hidden`` at a strength that
-    matters: (vessel, manoeuvre, simulation)."""
+def draw_case(
+    seed: int, hidden: tuple[str, ...], duration: float | None = None, manoeuvres=MANOEUVRES, vessel_kind: str = "any"
+):
+    """A vessel of ``vessel_kind`` (``simulator.random_vessel``'s) drawn from ``seed``, its manoeuvre
+    (one of ``manoeuvres``) and its simulated record of ``duration`` s (default ``DURATION_S`` of its
+    kind) with ``hidden`` at a strength that matters: (vessel, manoeuvre, simulation)."""
     rng = np.random.default_rng(seed)
-    vessel = random_vessel(rng)
+    vessel = random_vessel(rng, vessel_kind)
     kind = vessel.name.split("(")[0]
     manoeuvre = str(rng.choice(manoeuvres))
     duration, sample_time = duration or DURATION_S[kind], SAMPLE_TIME_S[kind]

@@ -390,14 +390,23 @@ def simulate(
     return replace(run, dataset=dataset)
 
 
+def _streams(seed: int) -> dict[str, int]:
+    """Each manoeuvre's own noise (and steps) seed, drawn from ``seed``."""
+    return dict(zip(MANOEUVRES, map(int, np.random.SeedSequence(seed).generate_state(len(MANOEUVRES)))))
+
+
+def held_out_recordings(hull: MmgHull, seed: int) -> Dataset:
+    """The held-out manoeuvres of ``hull`` (``HELD_OUT``: the 10/10 and 20/20 zigzags and the 35 deg
+    turning circle, one recording each, joined by ``join_recordings``), each manoeuvre's noise drawn
+    from its own stream of ``seed``."""
+    streams = _streams(seed)
+    return join_recordings([simulate(hull, m, streams[m]).dataset for m in HELD_OUT], names=list(HELD_OUT))
+
+
 def hull_recordings(hull: MmgHull, seed: int) -> tuple[Dataset, Dataset]:
-    """The training record (random rudder steps) and the held-out manoeuvres (``HELD_OUT``, one
-    recording each, joined by ``join_recordings``) of ``hull``, each manoeuvre's noise drawn from
-    its own stream of ``seed``."""
-    streams = np.random.SeedSequence(seed).generate_state(len(MANOEUVRES))
-    runs = {m: simulate(hull, m, int(s)) for m, s in zip(MANOEUVRES, streams)}
-    held_out = join_recordings([runs[m].dataset for m in HELD_OUT], names=list(HELD_OUT))
-    return runs[TRAINING].dataset, held_out
+    """The training record (random rudder steps) and the held-out manoeuvres (``held_out_recordings``)
+    of ``hull``, each manoeuvre's noise drawn from its own stream of ``seed``."""
+    return simulate(hull, TRAINING, _streams(seed)[TRAINING]).dataset, held_out_recordings(hull, seed)
 
 
 def overshoots(run: MmgRun, angle: float) -> list[float]:

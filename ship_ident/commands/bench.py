@@ -35,6 +35,12 @@ def add_parser(subparsers) -> None:
         + "; ".join(f"{b.name}: {', '.join(b.generators)}" for b in available.values() if b.generators)
         + " (default: the first)",
     )
+    options = {}
+    for benchmark in available.values():
+        for option in benchmark.options:
+            options.setdefault(option.flag, []).append(f"{benchmark.name}: {option.help}")
+    for flag, helps in sorted(options.items()):
+        parser.add_argument(f"--{flag}", type=int, metavar="N", help="; ".join(helps))
     parser.set_defaults(func=run)
 
 
@@ -52,6 +58,15 @@ def run(args) -> int:
                 f"{benchmark.name} has no generator {args.generator!r}; choose from {', '.join(benchmark.generators)}"
             )
         options["generator"] = args.generator
+    for flag in sorted({o.flag for b in benchmarks().values() for o in b.options}):
+        value = getattr(args, flag.replace("-", "_"))
+        if value is None:
+            continue
+        if flag not in {o.flag for o in benchmark.options}:
+            raise CommandError(f"--{flag} does not apply to {benchmark.name}")
+        if value < 0:
+            raise CommandError(f"--{flag} must be >= 0, got {value}")
+        options[flag.replace("-", "_")] = value
     if benchmark.plots and args.plot_dir:
         options["plot_dir"] = args.plot_dir
     if benchmark.randomised:

@@ -33,6 +33,7 @@ from ..io.files import Topics
 from ..io.fleet import FleetError, add_fleet_arguments, run_fleet
 from ..io.jsonio import dumps_json
 from ..online.config import OnlineConfig, spec
+from ..online.outputs import error_and_floor
 from .common import add_data_args, add_model_args, topics_from_args
 
 DEFAULTS = OnlineConfig()
@@ -188,10 +189,17 @@ def diagnosis_text(diagnosis: dict, start: float = 0.0) -> str:
     head = f"diagnosis at {bag_time(diagnosis['stamp'], start)} ({effects}):"
     if diagnosis["status"] != "done":
         return f"{head} skipped: {diagnosis['reason']}"
+    error, floor = error_and_floor(diagnosis)
+    pooled = diagnosis.get("pooled")
     lines = [
-        f"{head} {diagnosis['verdict']}; held-out yaw-rate error "
-        f"{math.degrees(diagnosis['held_out_error']):.3f} deg/s, noise floor "
-        f"{math.degrees(diagnosis['noise_floor']):.3f} deg/s",
+        f"{head} {diagnosis['verdict']}; held-out yaw-rate error {math.degrees(error):.3f} deg/s, noise floor "
+        f"{math.degrees(floor):.3f} deg/s"
+        + (
+            f" (pooled over {pooled['seconds'] / 60.0:.1f} min; this window's own "
+            f"{math.degrees(diagnosis['held_out_error']):.3f} deg/s)"
+            if pooled
+            else ""
+        ),
         f"  {diagnosis['verdict_sentence']}",
     ]
     if diagnosis.get("add_command"):
@@ -202,9 +210,11 @@ def diagnosis_text(diagnosis: dict, start: float = 0.0) -> str:
 
 
 def plot_diagnoses(records, path, title: str) -> None:
-    """PNG of the held-out yaw-rate error of every finished diagnosis over the trip (deg/s), the
-    noise floor, the diagnoses that found an effect missing (the effect named where it first
-    appears), and the effects in force as shaded bands."""
+    """PNG of the held-out yaw-rate error of every finished diagnosis over the trip (deg/s): pooled
+    since the model or vessel last changed (what the verdict is read from, ``~/held_out_error``)
+    against the pooled noise floor, each window's own as faint dots; the diagnoses that found an
+    effect missing (the effect named where it first appears), and the effects in force as shaded
+    bands."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -215,9 +225,12 @@ def plot_diagnoses(records, path, title: str) -> None:
     fig, ax = plt.subplots(figsize=(9, 4))
     if done:
         t = [d["stamp"] for d in done]
-        error = [math.degrees(d["held_out_error"]) for d in done]
-        ax.plot(t, error, "o-", ms=4, label="held-out yaw-rate error")
-        ax.plot(t, [math.degrees(d["noise_floor"]) for d in done], "--", color="grey", label="noise floor")
+        figures = [error_and_floor(d) for d in done]
+        error = [math.degrees(f[0]) for f in figures]
+        own = [math.degrees(d["held_out_error"]) for d in done]
+        ax.plot(t, error, "o-", ms=4, label="held-out yaw-rate error (pooled)")
+        ax.plot(t, own, ".", ms=4, color="tab:blue", alpha=0.35, label="a window's own")
+        ax.plot(t, [math.degrees(f[1]) for f in figures], "--", color="grey", label="noise floor")
         missing = [
             (d["stamp"], e, d["candidates"][0]["effect"])
             for d, e in zip(done, error)
@@ -245,7 +258,7 @@ def plot_diagnoses(records, path, title: str) -> None:
                     color="tab:red",
                 )
             named = effect
-        ax.set_ylim(0.0, 1.3 * max(error))
+        ax.set_ylim(0.0, 1.3 * max(error + own))
     spans = []  # [start, end, effects in force]: changed by auto-add at its diagnosis, or from outside
     for d in diagnoses:
         effects = "+".join(d["structure"]["effects"]) or "no effects"
@@ -262,7 +275,7 @@ def plot_diagnoses(records, path, title: str) -> None:
         ax.text(start, 0.98, " " + effects, transform=ax.get_xaxis_transform(), va="top", fontsize=7)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("deg/s")
-    ax.set_title(f"{title}: held-out free-run error of each diagnosis; effects in force shaded", fontsize=9)
+    ax.set_title(f"{title}: held-out free-run error pooled since the model changed; effects shaded", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower left", fontsize=7)
     fig.tight_layout()

@@ -19,8 +19,12 @@ candidate's pooled share of the yaw-rate error removed (``1 - sqrt(sum e_after^2
 e_before^2)``) and its Diebold-Mariano t over all pooled samples follow: the mean squared-error
 drop over its standard error, the slices' variances of the summed differential (each from its
 own autocorrelation) added as independent. A candidate is **significant** when it removes
-at least ``MIN_IMPROVEMENT`` (15 %) of the pooled error with t >= ``SIGNIFICANCE_T`` (3) and its
-training free runs gain on average (``MIN_TRAINING_GAIN``): the rule of ``diagnose`` on more data.
+at least ``MIN_IMPROVEMENT`` (15 %) of the pooled error, or ``MOST_OF_THE_ERROR`` (half) of the
+pooled error above the noise floor with ``CLEAR_TRAINING_GAIN`` (10 %) off the training free runs
+(``PooledEvidence.removes_enough``: the gyro's noise, which no model removes, must not hide a
+missing effect the free runs show with certainty), with t >= ``SIGNIFICANCE_T`` (3) and its
+training free runs gaining on average (``MIN_TRAINING_GAIN``): the rule of ``diagnose`` on more
+data.
 
 **One name.** Once an effect is named ``missing_effect``, the verdict names it as long as the pool
 holds it (its t stays significant: slices where the effect does not show dilute its share of the
@@ -63,12 +67,13 @@ from ..model.dataset import DataError, Dataset
 from ..model.effects import EFFECTS
 from ..model.metrics import effective_sample_fraction
 from ..model.structure import StructureError
-from .diagnose import DEFAULT_METHOD as DIAGNOSIS_METHOD
 from .diagnose import (
+    CLEAR_TRAINING_GAIN,
     EQUIVALENT_MARGIN,
     MIN_HELD_OUT_S,
     MIN_IMPROVEMENT,
     MIN_TRAINING_GAIN,
+    MOST_OF_THE_ERROR,
     NOISE_MARGIN,
     PARSIMONY,
     SIGNIFICANCE_T,
@@ -76,6 +81,7 @@ from .diagnose import (
     diagnose,
     free_run,
 )
+from .diagnose import DEFAULT_METHOD as DIAGNOSIS_METHOD
 
 CHECK_DIAGNOSES = 2  # an added effect must cut the held-out error within this many diagnoses
 WORST_SHOWN = 3  # worst free-run segments (with their conditions) in the record
@@ -299,6 +305,29 @@ class PooledEvidence:
         """Sample-weighted mean share of the training free runs' yaw-rate error ``name`` removes."""
         return float(self.training_gain_sum[self.row(name)] / self.samples)
 
+    def excess_removed(self, name: str) -> float:
+        """Share of the pooled held-out yaw-rate error above the noise floor that adding ``name``
+        removes: ``1 - sqrt((S_name - N) / (S_model - N))`` with ``S`` the pooled squared errors and
+        ``N`` the noise floor's (``S_name - N`` taken as 0 below the floor); 0 when the model's
+        error does not exceed the floor. The gyro's white noise is in every free run's yaw-rate
+        error and no model removes it: where the model misses little against it (a gentle
+        manoeuvre, a noisy gyro), the share of the total error an effect can remove stays small
+        however certain the evidence, while the share of what a model can explain does not."""
+        excess = self.squares[0] - self.noise_squares
+        if excess <= 0:
+            return 0.0
+        return 1.0 - math.sqrt(max(self.squares[self.row(name)] - self.noise_squares, 0.0) / excess)
+
+    def removes_enough(self, name: str) -> bool:
+        """``name`` removes at least ``MIN_IMPROVEMENT`` of the pooled yaw-rate error, or
+        ``MOST_OF_THE_ERROR`` of the error above the noise floor with a clear gain on the training
+        free runs (``CLEAR_TRAINING_GAIN``): the latter is ``diagnose``'s clear case, on the part of
+        the error a model can explain."""
+        return bool(
+            self.improvement(name) >= MIN_IMPROVEMENT
+            or (self.excess_removed(name) >= MOST_OF_THE_ERROR and self.training_gain(name) >= CLEAR_TRAINING_GAIN)
+        )
+
     def t_statistic(self, worse: str, better: str) -> float:
         """Diebold-Mariano t that ``better``'s squared held-out error lies below ``worse``'s: the
         pooled sum of the differential over the square root of the sum of the slices' variances
@@ -316,9 +345,10 @@ class PooledEvidence:
         return bool(self.improvement(name) > 0 and self.t_statistic(MODEL, name) >= SIGNIFICANCE_T)
 
     def significant(self, name: str) -> bool:
-        """``name`` removes a significant share of the pooled error (the rule of ``diagnose``)."""
+        """``name`` removes a significant share of the pooled error: enough of it (``removes_enough``)
+        with t >= ``SIGNIFICANCE_T``, its training free runs gaining (the rule of ``diagnose``)."""
         return bool(
-            self.improvement(name) >= MIN_IMPROVEMENT
+            self.removes_enough(name)
             and self.t_statistic(MODEL, name) >= SIGNIFICANCE_T
             and self.training_gain(name) >= MIN_TRAINING_GAIN
         )
@@ -328,7 +358,7 @@ class PooledEvidence:
         return self.improvement(name) - PARSIMONY * len(EFFECTS[name].parameters)
 
     def equivalents(self, leader: str) -> list[str]:
-        """The candidates the pool cannot tell from ``leader``: removing at least ``MIN_IMPROVEMENT``,
+        """The candidates the pool cannot tell from ``leader``: removing enough (``removes_enough``),
         within ``EQUIVALENT_MARGIN`` of ``leader``'s improvement (or above it) and with a held-out
         error ``leader``'s is not significantly below; best first."""
         lead = self.improvement(leader)
@@ -336,7 +366,7 @@ class PooledEvidence:
             name
             for name in self.names[1:]
             if name != leader
-            and self.improvement(name) >= MIN_IMPROVEMENT
+            and self.removes_enough(name)
             and lead - self.improvement(name) <= EQUIVALENT_MARGIN
             and self.t_statistic(name, leader) < SIGNIFICANCE_T
         ]
@@ -665,7 +695,8 @@ class OnlineDiagnosis:
             result["add_command"] = add_command(self.node, effects + (found,))
             result["verdict_sentence"] = (
                 f"{found} is missing: on the {rests_on} (held-out error {ratio:.1f} times the noise floor) "
-                f"adding it removes {100 * pool.improvement(found):.0f} % of the yaw-rate error "
+                f"adding it removes {100 * pool.improvement(found):.0f} % of the yaw-rate error, "
+                f"{100 * pool.excess_removed(found):.0f} % of what lies above the noise floor "
                 f"(t {pool.t_statistic(MODEL, found):.1f}); {top['evidence']}"
                 + (
                     f"; near-equivalent on these data: {', '.join(group)} ({self._shares(pool, group)}); "
@@ -724,6 +755,7 @@ class OnlineDiagnosis:
             candidate["significant"] = name == found or pool.significant(name)
             candidate["pooled"] = {
                 "improvement_yaw_rate": pool.improvement(name),
+                "excess_removed": pool.excess_removed(name),
                 "t_statistic": pool.t_statistic(MODEL, name),
                 "training_gain": pool.training_gain(name),
             }
@@ -747,12 +779,14 @@ class OnlineDiagnosis:
         if best is None:
             tail = "; no catalogued effect is left to try"
         else:
-            group = pool.equivalents(best) if pool.improvement(best) >= MIN_IMPROVEMENT else []
+            group = pool.equivalents(best) if pool.removes_enough(best) else []
             tail = (
                 f"; no catalogued effect removes it significantly (best: {best} removes "
-                f"{100 * pool.improvement(best):.0f} %, t {pool.t_statistic(MODEL, best):.1f}; significant takes "
-                f"{100 * MIN_IMPROVEMENT:.0f} % and t {SIGNIFICANCE_T:g}: more data, or a manoeuvre that excites "
-                "it, would tell"
+                f"{100 * pool.improvement(best):.0f} %, {100 * pool.excess_removed(best):.0f} % of what lies "
+                f"above the noise floor, t {pool.t_statistic(MODEL, best):.1f}; significant takes "
+                f"{100 * MIN_IMPROVEMENT:.0f} %, or {100 * MOST_OF_THE_ERROR:.0f} % above the floor with "
+                f"{100 * CLEAR_TRAINING_GAIN:.0f} % off the training free runs, and t {SIGNIFICANCE_T:g}: more data, "
+                "or a manoeuvre that excites it, would tell"
                 + (f"; as good so far: {self._shares(pool, group)}; {separation([best, *group])}" if group else "")
                 + ")"
             )

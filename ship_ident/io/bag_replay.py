@@ -6,7 +6,7 @@ the machine allows. ``replay_bag`` optionally writes an MCAP as it goes: the
 input topics and the node's outputs ``/ship_ident/estimate`` (the JSON
 record) and ``/ship_ident/parameters`` at the refit times, and with
 ``diagnosis_period`` set ``/ship_ident/diagnosis`` (JSON) and
-``/ship_ident/held_out_error`` (rad/s) at the refits where a diagnosis
+``/ship_ident/held_out_error`` (rad/s, pooled as the verdict reads it) at the refits where a diagnosis
 finished (``diagnosis.onboard``, run inline: reproducible), complete even
 when a ``stop`` event ends the replay early. The MCAP also holds
 ``/ship_ident/predicted_yaw_rate`` at the yaw-rate samples' times

@@ -114,6 +114,10 @@ def diagnostic_status(record: RefitRecord, extra: dict | None = None) -> tuple[i
 def error_and_floor(diagnosis: dict | None) -> tuple[float, float] | None:
     """The held-out free-run yaw-rate error of a finished diagnosis and its noise floor.
 
+    The figures its verdict is read from: those pooled since the model or vessel last changed
+    (``diagnosis["pooled"]``), or the window's own while nothing is pooled yet. One window's error
+    scatters about the floor by its fit's own scatter; the pooled one settles as the evidence grows.
+
     Parameters
     ----------
     diagnosis : dict or None
@@ -126,7 +130,8 @@ def error_and_floor(diagnosis: dict | None) -> tuple[float, float] | None:
     """
     if diagnosis is None or diagnosis.get("status") != "done":
         return None
-    return float(diagnosis["held_out_error"]), float(diagnosis["noise_floor"])
+    figures = diagnosis.get("pooled", diagnosis)
+    return float(figures["held_out_error"]), float(figures["noise_floor"])
 
 
 class YawRatePrediction:

@@ -18,7 +18,8 @@ Every ``diagnosis_period`` the window is diagnosed (``diagnosis.onboard``) in a
 child process at low priority, off the refit path: ``~/diagnosis`` (JSON
 String: verdict, candidates, held-out error, noise floor, the ``ros2 param
 set`` that adds the missing effect), ``~/held_out_error`` and
-``~/noise_floor`` (Float64, rad/s) and a ``missing_effect`` WARN in ``/diagnostics``; with ``auto_add_effects``
+``~/noise_floor`` (Float64, rad/s: pooled since the model or vessel last changed, what the verdict
+is read from) and a ``missing_effect`` WARN in ``/diagnostics``; with ``auto_add_effects``
 the node adds (and may remove again) an effect itself, through its own
 ``effects`` parameter, and logs it.
 Once per refit the ROS graph is checked for publishers of another message
@@ -376,8 +377,8 @@ class IdentifierNode(Node):
             self._publish_diagnosis(record.diagnosis)
 
     def _publish_diagnosis(self, diagnosis: dict) -> None:
-        """``~/diagnosis`` (JSON), ``~/held_out_error`` and ``~/noise_floor`` (rad/s) and auto-add's
-        announcement in the log."""
+        """``~/diagnosis`` (JSON), ``~/held_out_error`` and ``~/noise_floor`` (rad/s, pooled: the
+        verdict's figures, ``outputs.error_and_floor``) and auto-add's announcement in the log."""
         self.diagnosis_pub.publish(String(data=dumps_json(diagnosis)))
         finished = error_and_floor(diagnosis)
         if finished is not None:

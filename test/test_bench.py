@@ -84,7 +84,7 @@ def test_onboard_steady_quick_raises_no_missing_effect_over_dds():
 
 
 def test_onboard_diagnosis_quick_names_a_hidden_rudder_offset_once_and_raises_no_false_alarm():
-    """Two 10-minute trips replayed with the diagnosis on board (the 15-minute trips of the ten kinds are
+    """Two 7-minute trips replayed with the diagnosis on board (the 15-minute trips of the ten kinds are
     ``bench onboard-diagnosis``'s): a USV zigzagging with a hidden rudder offset, and a USV in steady
     turns with nothing hidden."""
     result = benchmarks()["onboard-diagnosis"].run(True, seed=1)

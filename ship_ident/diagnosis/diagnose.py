@@ -66,7 +66,7 @@ from ..model.dataset import DataError, Dataset, cut_segments
 from ..model.effects import EFFECTS, Evidence, StartContext, heading_harmonics, yaw_time_constant
 from ..model.integrate import forcing as yaw_forcing
 from ..model.metrics import effective_sample_fraction, free_run_fit, signal_metrics
-from ..model.signals import Signals, compute_signals, smoothing_window
+from ..model.signals import Signals, compute_signals
 from ..model.structure import Structure, nomoto_parameters
 
 DEFAULT_METHOD = "rlssvm+oe"  # cheap start + output-error refinement: the fits dominate the run time
@@ -381,130 +381,15 @@ def free_run(structure: Structure, parameters: dict, dataset: Dataset) -> FreeRu
     parameters : dict
         Its parameters (SI units).
     dataset : Dataset
-        The data; each segment's run starts from the hull's state at its first sample as the
-        measurements give it (``window_start_states``).
+        The data; each segment's run starts from the measured state at its first sample.
 
     Returns
     -------
     FreeRun
         Heading (rad) and yaw rate (rad/s) of the runs, with the data they are judged on.
     """
-    initial = fitted_start_states(structure, parameters, dataset)
-    heading, yaw_rate = structure.simulate(parameters, dataset, initial=initial)
+    heading, yaw_rate = structure.simulate(parameters, dataset)
     return FreeRun(heading, yaw_rate, free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate))
-
-
-START_STATE_STEP = 1e-3  # rad/s (yaw rate) and rad/s^2 (yaw acceleration): finite-difference steps of the start
-START_STATE_FAST_POLES = 3.0  # the start is fitted over this many fast time constants (at most the mean delay)
-START_STATE_RCOND = 1e-3  # a start direction less sensitive than this share of the largest keeps its measured value
-
-
-def fitted_start_states(structure: Structure, parameters: dict, dataset: Dataset) -> list[tuple[float, float, float]]:
-    """Each free-run window's start state for ``structure`` at ``parameters``: heading (rad), the
-    hull's yaw rate (rad/s) and yaw acceleration (rad/s^2), starting from the measured state
-    (``window_start_states``, the gyro bias removed) and fitted so the model's yaw rate follows the
-    measured one over the window's first ``START_STATE_FAST_POLES`` fast time constants (where an
-    error of the start's yaw acceleration shows; at most the mean delay ``effects.yaw_time_constant``,
-    at least the smoothing window and five samples; a first-order hull's yaw rate over the smoothing
-    window alone): one Gauss-Newton step of a linear least-squares problem in the two rates. A
-    longer span would let a wrong model follow the first part of every window (a slow ship's base
-    fit with T1 195 s, fitted over it, hid 85 % of a gyro bias's yaw-rate error).
-
-    A second-order hull's memory at the start is T1 T2 r' + (T1 + T2) r - K T3 delta: an error of
-    0.01 rad/s^2 in the yaw acceleration there is a yaw-rate error of T1 T2 / (T1 + T2) times it,
-    0.7 deg/s on a USV with T1 7 s and T2 1.5 s, which no smoothing of the measured yaw rate near a
-    rudder step avoids. Every model is given the start that suits it on the same first samples, as
-    a model's initial state is a nuisance of the output-error problem; directions the first samples
-    do not determine (``START_STATE_RCOND``: a fast pole's acceleration) keep the measured value.
-
-    Parameters
-    ----------
-    structure : Structure
-        The model run free.
-    parameters : dict
-        Its parameters (SI units).
-    dataset : Dataset
-        The data; each segment is one free-run window.
-
-    Returns
-    -------
-    list of tuple
-        (heading rad, yaw rate rad/s, yaw acceleration rad/s^2) of the hull at each segment's
-        first sample, in the order of ``dataset.segments``.
-    """
-    bias = structure.yaw_rate_bias(parameters)  # the gyro reads the hull's yaw rate plus its bias
-    measured = [(psi0, r0 - bias, r_dot0) for psi0, r0, r_dot0 in window_start_states(dataset)]
-    h = dataset.sample_time
-    span_s = 0.0  # a first-order hull's only state is its yaw rate, which the local fit measures
-    if structure.order == 2:
-        fast = structure.fastest_time_constant(parameters)
-        span_s = min(START_STATE_FAST_POLES * fast, yaw_time_constant(parameters))
-    span = max(5, int(round(max(span_s, smoothing_window(dataset.noise_std("yaw_rate"))) / h)))
-    spans = [(a, min(b, a + span)) for a, b in dataset.segments]
-    first = replace(dataset, segments=spans)
-    steps = np.diag([0.0, START_STATE_STEP, START_STATE_STEP])
-    initials = [[tuple(np.add(state, step)) for state in measured] for step in (steps[0], steps[1], steps[2])]
-    _, runs = structure.simulate_runs([parameters] * 3, first, initials)
-    fitted = []
-    for (a, b), state in zip(spans, measured):
-        error = runs[0][a:b] - dataset.yaw_rate[a:b]
-        sensitivity = np.column_stack([(runs[k][a:b] - runs[0][a:b]) / START_STATE_STEP for k in (1, 2)])
-        usable = np.isfinite(error) & np.isfinite(sensitivity).all(axis=1)
-        if usable.sum() < 2:
-            fitted.append(state)
-            continue
-        scale = np.linalg.norm(sensitivity[usable], axis=0)
-        scale[scale == 0] = 1.0
-        shift = np.linalg.lstsq(sensitivity[usable] / scale, -error[usable], rcond=START_STATE_RCOND)[0] / scale
-        fitted.append((state[0], state[1] + float(shift[0]), state[2] + float(shift[1])))
-    return fitted
-
-
-def window_start_states(dataset: Dataset) -> list[tuple[float, float, float]]:
-    """The hull's state at the first sample of every segment (free-run window) of ``dataset``:
-    heading (rad), yaw rate (rad/s, as the gyro reads it) and yaw acceleration (rad/s^2), from a
-    local quadratic fit in time to the measured heading and yaw rate over ``signals.smoothing_window``
-    of the yaw-rate noise, centred on that sample where the record runs on both sides of it
-    (adjacent windows are one record).
-
-    A free run started from the single noisy yaw-rate sample with r' = 0 carries that sample's
-    noise, and the missing yaw acceleration of a window that starts mid-turn, through the slow
-    pole: a yaw-rate error e0 leaves a heading offset of about e0 T1 for the rest of the window.
-    A model with a faster response forgets a wrong start sooner, so such starts ranked wrong models
-    with fast poles above the true one (a USV with a hidden cubic damping, T1 7 s: the true model at
-    its known parameters missed the yaw rate by 1.3 deg/s over the first 6 s of windows starting in
-    a turn, and its held-out heading error was three times that of a course_instability fit).
-
-    Parameters
-    ----------
-    dataset : Dataset
-        The data; each segment is one free-run window.
-
-    Returns
-    -------
-    list of tuple
-        (heading rad, measured yaw rate rad/s, yaw acceleration rad/s^2) at each segment's first
-        sample; a window in a record shorter than five samples keeps its first sample and r' = 0.
-    """
-    h = dataset.sample_time
-    half = max(1, int(round(0.5 * smoothing_window(dataset.noise_std("yaw_rate")) / h)))
-    records, states = [], []
-    for a, b in sorted(dataset.segments):
-        if records and records[-1][1] == a:
-            records[-1][1] = b  # a window that goes on where the last ended: one record
-        else:
-            records.append([a, b])
-    for a, _ in dataset.segments:
-        lo, hi = next((max(r0, a - half), min(r1, a + half + 1)) for r0, r1 in records if r0 <= a < r1)
-        if hi - lo < 5:
-            states.append((float(dataset.heading[a]), float(dataset.yaw_rate[a]), 0.0))
-            continue
-        t = dataset.time[lo:hi] - dataset.time[a]
-        basis = np.column_stack([np.ones_like(t), t, t**2])
-        heading = np.linalg.lstsq(basis, dataset.heading[lo:hi], rcond=None)[0]
-        yaw_rate = np.linalg.lstsq(basis, dataset.yaw_rate[lo:hi], rcond=None)[0]
-        states.append((float(heading[0]), float(yaw_rate[0]), float(yaw_rate[1])))
-    return states
 
 
 def _estimator(method: str):
@@ -830,64 +715,7 @@ def _fit(structure: Structure, training: Dataset, method: str, nested: dict | No
     regression = make_estimator(regression_method(method))
     context = StartContext(training, dict(start), lambda data: regression.fit(bare, data).parameters)
     extra = [dict(start, **s) for s in structure.effects[-1].starts(context)] if structure.effects else []
-    estimate = estimator.fit(structure, training, starts=(start, *extra))
-    return from_best_profile_start(estimator, structure, estimate, training, extra)
-
-
-PROFILE_AGAIN_NOISE_LEVELS = 1.5  # a fit whose training residual stays above this many noise levels also
-# searches from the profile's best start (``from_best_profile_start``)
-
-
-def from_best_profile_start(estimator, structure: Structure, estimate: Estimate, training: Dataset, starts: list):
-    """``estimate``, or a search from the effect's start (``Effect.starts``: a profile over a
-    parameter with several minima) whose free runs on the training data, cut into the diagnosis's
-    windows, follow the yaw rate closest, when ``estimate`` ends farther from it than that start, or
-    with a training residual above ``PROFILE_AGAIN_NOISE_LEVELS`` noise levels (it has not found
-    the hull), and the search from it ends closer.
-
-    The estimator goes on from the start whose short shooting intervals fit best; each interval's
-    own initial state absorbs a shift of the response by a second, which is how a dead time
-    shows, while a free run over many time constants does not. A USV with a 1.0 s steering delay
-    and a rudder lead T3 of 2.3 s (which cancel into a response without either) went on from the
-    model without the delay and stopped at tau 0.1 s, T3 0: 2.6 times the yaw-rate error of the
-    profile's start at tau 1.07 s, from which the search finds the truth. A USV with a 1.66 s
-    delay and a 1.88 s lead stopped at tau 0.9 s, T3 0, 1.7 noise levels: the profile's regression
-    starts are biased (K 10 % low), none runs closer than that, but the search from the best of them
-    (tau 2.1 s) ends at 0.96 noise levels and removes most of the held-out error.
-
-    Parameters
-    ----------
-    estimator : Estimator
-        The iterative estimator that fitted ``estimate``.
-    structure : Structure
-        The model with the effect.
-    estimate : Estimate
-        Its fit from all starts.
-    training : Dataset
-        The training data.
-    starts : list of dict
-        The effect's starting points (SI units); parameters they lack are ``estimate``'s.
-
-    Returns
-    -------
-    Estimate
-        ``estimate``, or the search from the best start when it runs closer to the training data.
-    """
-    if not starts:
-        return estimate
-    cut = windows(training, held_out_window(estimate.parameters, covered(training)))
-
-    def error(parameters: dict) -> float:
-        value = free_run(structure, parameters, cut).fit["rmse_yaw_rate"]
-        return float(value) if np.isfinite(value) else np.inf
-
-    best = min((dict(estimate.parameters, **start) for start in starts), key=error)  # fixed ones (U_ref) kept
-    reached = error(estimate.parameters)
-    above_noise = estimate.info.get("cost_ratio", 0.0) > PROFILE_AGAIN_NOISE_LEVELS
-    if error(best) >= reached and not above_noise:
-        return estimate
-    again = estimator.fit(structure, training, starts=(best,))
-    return again if error(again.parameters) < reached else estimate
+    return estimator.fit(structure, training, starts=(start, *extra))
 
 
 REBASE_GAIN = 0.9  # the model is refitted when a candidate's start lowers its training fit residual this much

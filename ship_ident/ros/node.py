@@ -31,7 +31,7 @@ process at low priority compiles the refit's numeric kernels into numba's cache
 while the window fills.
 
 Run: ``identifier_node --ros-args --params-file config/ship_ident.yaml``
-(or ``python -m ship_ident.node``). SIGINT and SIGTERM stop it cleanly.
+(or ``python -m ship_ident.ros.node``). SIGINT and SIGTERM stop it cleanly.
 """
 
 from __future__ import annotations

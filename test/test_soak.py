@@ -1,5 +1,7 @@
-"""Soak and load: the node fed 100 Hz on each input for 10 minutes of simulated time, as fast as
-it keeps up (paced /clock), over real DDS. Figures are printed (``pytest -s``); docs/reliability.md."""
+"""Soak and load: the node fed 100 Hz on each input for 10 minutes of simulated time at up to 6x
+real time (paced /clock), over real DDS. The feed waits whenever the clock runs more than two refit
+periods ahead of the node's newest refit, so a loaded machine slows the soak instead of failing it.
+Figures are printed (``pytest -s``); docs/reliability.md."""
 
 import math
 import subprocess
@@ -21,6 +23,8 @@ INPUT_RATE = 100.0  # Hz on each of rudder, heading, yaw rate
 PACE = 6.0  # x real time: 1800 data messages/s plus 600 /clock messages/s
 WARM_UP = 250.0  # s of simulated time: window full, compiled code loaded
 REFIT_PERIOD = 5.0  # s
+MAX_LEAD = 2 * REFIT_PERIOD  # s of simulated time the clock may run ahead of the node's newest refit
+CATCH_UP_TIMEOUT = 60.0  # s of wall time for the node to come within MAX_LEAD
 
 
 def rss_mib(pid: int) -> float:
@@ -39,6 +43,7 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
     listener = Listener(domain_id)
     player = Player(listener.node)
     rss = {}
+    waited = 0.0  # s of wall time the feed waited for the node
     try:
         assert player.wait_for_subscribers(20.0)
         listener.spin(1.0)
@@ -52,10 +57,19 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
                 listener.executor.spin_once(timeout_sec=0)
                 if "warm" not in rss and t >= WARM_UP:
                     rss["warm"] = rss_mib(node.pid)
+                if listener.estimates and t - listener.estimates[-1]["stamp"] > MAX_LEAD:
+                    start = time.monotonic()
+                    caught_up = listener.spin(
+                        CATCH_UP_TIMEOUT, lambda t=t: t - listener.estimates[-1]["stamp"] <= MAX_LEAD
+                    )
+                    newest = listener.estimates[-1]["stamp"]
+                    assert caught_up, f"the node's newest refit is at {newest:g} s, the clock at {t:g} s"
+                    waited += time.monotonic() - start
+                    wall0 += time.monotonic() - start
             delay = wall0 + t / PACE - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-        wall = time.monotonic() - wall0
+        wall = time.monotonic() - wall0  # the waits for the node left out
         listener.spin(3.0)
         rss["end"] = rss_mib(node.pid)
         assert node.poll() is None
@@ -73,6 +87,7 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
         "simulated_s": SIM_SECONDS,
         "wall_s": wall,
         "x_real_time": SIM_SECONDS / wall,
+        "waited_for_node_s": waited,
         "data_messages_per_s_sent": sent / wall,
         "accepted_per_s": counts["accepted"] / wall,
         "accepted_share": counts["accepted"] / sent,
@@ -91,6 +106,6 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
     assert rss["end"] - rss["warm"] < 30.0  # flat after warm-up
     assert figures["accepted_share"] > 0.5  # most messages used
     assert stamps[-1] >= SIM_SECONDS - 2 * REFIT_PERIOD  # no backlog at the end
-    # the schedule is kept though ticks come late on a loaded machine (0.89 at load average 10 on 2 cores)
+    # the schedule is kept though ticks come late on a loaded machine
     assert figures["period_kept_share"] >= 0.75 and len(records) >= 0.9 * SIM_SECONDS / REFIT_PERIOD
     assert len(latency) >= 0.5 * len(records) and math.isfinite(latency.max())

@@ -128,6 +128,25 @@ class InnovationFilter:
         started at zero (the series starts from a known state)."""
         return _whiten(self.A, self.gain, self.C, self.s_inv_sqrt, np.ascontiguousarray(errors, dtype=float))
 
+    def whiten_blocks(self, heading_error: np.ndarray, yaw_rate_error: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+        """The residual vector -S^-1/2 e_k of a free-run error series run free block by block: the
+        predictor restarted at zero at each block's first sample (each block starts from a known state).
+
+        Parameters
+        ----------
+        heading_error, yaw_rate_error : numpy.ndarray
+            (N,) free-run errors of heading (rad) and yaw rate (rad/s).
+        blocks : numpy.ndarray
+            (blocks, 2) half-open sample-index ranges (int64).
+
+        Returns
+        -------
+        numpy.ndarray
+            (2 N,) the negated whitened innovations (dimensionless): every sample's heading
+            component, then every sample's yaw-rate one.
+        """
+        return _whiten_blocks(self.A, self.gain, self.C, self.s_inv_sqrt, heading_error, yaw_rate_error, blocks)
+
 
 def innovation_filter(model: NoiseModel) -> InnovationFilter:
     """The steady Kalman filter of the correlated-noise model (Riccati equation, scipy's DARE).
@@ -159,24 +178,43 @@ def innovation_filter(model: NoiseModel) -> InnovationFilter:
 
 
 @njit(cache=True)
-def _whiten(A, gain, C, s_inv_sqrt, errors):
-    n, m = errors.shape[0], A.shape[0]
+def _whiten_span(A, gain, C, s_inv_sqrt, heading_error, yaw_rate_error, start, stop, sign, heading_out, yaw_rate_out):
+    """The innovations of samples start..stop-1, the predictor started at zero there, times ``sign``
+    (+1 or -1: exact), into ``heading_out`` and ``yaw_rate_out``."""
+    m = A.shape[0]
     x = np.zeros(m)
     x_next = np.zeros(m)
-    out = np.empty((n, 2))
-    for k in range(n):
-        e0, e1 = errors[k, 0], errors[k, 1]
+    for k in range(start, stop):
+        e0, e1 = heading_error[k], yaw_rate_error[k]
         for i in range(m):
             e0 -= C[0, i] * x[i]
             e1 -= C[1, i] * x[i]
-        out[k, 0] = s_inv_sqrt[0, 0] * e0 + s_inv_sqrt[0, 1] * e1
-        out[k, 1] = s_inv_sqrt[1, 0] * e0 + s_inv_sqrt[1, 1] * e1
+        heading_out[k] = sign * (s_inv_sqrt[0, 0] * e0 + s_inv_sqrt[0, 1] * e1)
+        yaw_rate_out[k] = sign * (s_inv_sqrt[1, 0] * e0 + s_inv_sqrt[1, 1] * e1)
         for i in range(m):
             v = gain[i, 0] * e0 + gain[i, 1] * e1
             for j in range(m):
                 v += A[i, j] * x[j]
             x_next[i] = v
         x, x_next = x_next, x
+
+
+@njit(cache=True)
+def _whiten(A, gain, C, s_inv_sqrt, errors):
+    n = errors.shape[0]
+    out = np.empty((n, 2))
+    _whiten_span(A, gain, C, s_inv_sqrt, errors[:, 0], errors[:, 1], 0, n, 1.0, out[:, 0], out[:, 1])
+    return out
+
+
+@njit(cache=True)
+def _whiten_blocks(A, gain, C, s_inv_sqrt, heading_error, yaw_rate_error, blocks):
+    n = heading_error.shape[0]
+    out = np.empty(2 * n)
+    for b in range(blocks.shape[0]):
+        _whiten_span(
+            A, gain, C, s_inv_sqrt, heading_error, yaw_rate_error, blocks[b, 0], blocks[b, 1], -1.0, out[:n], out[n:]
+        )
     return out
 
 

@@ -614,7 +614,10 @@ class OutputError(Estimator):
         points = [np.clip(np.concatenate([g, search.states0.ravel()]), search.lo, search.hi) for g in guesses]
         substeps = max(fit_substeps(h, problem.unpack(x)[0]) for x in points)
         at = [problem.unpack(x)[0] for x in points] if weighted_at is None else [weighted_at] * len(points)
-        weighings = [self.residual_weighting(structure, dataset, q, s_psi, s_r, problem.blocks) for q in at]
+        weighings = []  # one noise model per distinct parameter set (a Riccati equation each)
+        for i, q in enumerate(at):
+            same = next((weighings[j] for j in range(i) if at[j] == q), None)
+            weighings.append(same or self.residual_weighting(structure, dataset, q, s_psi, s_r, problem.blocks))
         linear = [names.index(n) for n in LINEAR_NAMES if n in names] + list(range(p, problem.size))
         # the first step holds the rudder offset: at a gain far off its column (the gain times the
         # offset) is tiny and the step would send the offset to its bound, losing a slow ship's start

@@ -90,14 +90,8 @@ class PredictionError(OutputError):
         s_delta = dataset.noise_std("rudder", np.radians(0.001))
         kalman = innovation_filter(noise_model(structure, params0, h, fit_substeps(h, params0), s_delta, s_psi, s_r))
 
-        def weigh(psi_err, r_err):
-            errors = np.column_stack([psi_err, r_err])
-            out = np.empty_like(errors)
-            for a, z in intervals:
-                out[a:z] = kalman.whiten(errors[a:z])
-            return -out.T.ravel()
-
-        return weigh, kalman.log_det_covariance
+        blocks = np.array(intervals, dtype=np.int64).reshape(-1, 2)
+        return (lambda psi_err, r_err: kalman.whiten_blocks(psi_err, r_err, blocks)), kalman.log_det_covariance
 
     @staticmethod
     def bandwidth(intervals) -> int:

@@ -275,8 +275,7 @@ def _t1_profile_rise(identifier: OnlineIdentifier, time: float, truth: dict) -> 
         best = estimator.fit(structure, window, starts=(truth,))
 
         def cost(t1: float) -> float:
-            held = estimator.fit_held(structure, window, best, {"T1": t1}, ("T1",), weighted_at=best.parameters)
-            return held.info["cost"]
+            return estimator.held_point(structure, window, best, {"T1": t1}, ("T1",), best.parameters)[1]
 
         base = cost(best.parameters["T1"])
         return float(min(cost(f * truth["T1"]) - base for f in (1 - OFF_TOLERANCE, 1 + OFF_TOLERANCE)))

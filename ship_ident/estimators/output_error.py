@@ -52,7 +52,8 @@ their sum and product are determined).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import sparse
@@ -96,11 +97,22 @@ def shooting_intervals(segments, samples_per_interval: int) -> tuple[tuple[int, 
 
 @dataclass
 class LeastSquaresResult:
+    """A search's end: the unknowns ``x``, their residuals ``fun``, the iterations and whether it
+    converged; ``jac``, the Jacobian at ``x``, is taken by ``jacobian(x, fun)`` on first use (a
+    profile's point needs its cost alone, not the simulations of a last Jacobian)."""
+
     x: np.ndarray
     fun: np.ndarray
-    jac: np.ndarray
     iterations: int
     success: bool
+    jacobian: Callable = field(repr=False)
+    known_jac: np.ndarray | None = field(default=None, repr=False)  # the Jacobian at x, once taken
+
+    @property
+    def jac(self):
+        if self.known_jac is None:
+            self.known_jac = self.jacobian(self.x, self.fun)
+        return self.known_jac
 
 
 def bounded_levenberg_marquardt(
@@ -111,8 +123,9 @@ def bounded_levenberg_marquardt(
 
     The normal equations are (p x p) with p the unknowns, so an iteration costs the
     Jacobian's simulations and almost nothing else (``jacobian`` may return a scipy sparse
-    matrix). It stops when a step gains less than ``tolerance`` of the cost (far below the
-    chi-square scatter of the cost, 1/sqrt(N)) or less
+    matrix; the one at the end is taken only when the result's ``jac`` is read). It stops when a
+    step gains less than ``tolerance`` of the cost (far below the chi-square scatter of the cost,
+    1/sqrt(N)) or less
     than ``CHI_SQUARE_TOLERANCE``: the residuals are in noise units, so such a step moves the
     parameters by a tenth of a standard error or less. The damping lam grows tenfold on a
     rejected step and shrinks tenfold on an accepted one; ``gentle`` (for a search that crawls
@@ -124,8 +137,9 @@ def bounded_levenberg_marquardt(
     f = residual(x)
     cost = float(f @ f)
     lam, converged = 1e-3, False
-    J = jacobian(x, f)
+    J = None  # the Jacobian at x, taken when a step is sought from x
     for iteration in range(1, max_iterations + 1):  # noqa: B007 (the count is returned)
+        J = jacobian(x, f) if J is None else J
         g, A = J.T @ f, _dense(J.T @ J)
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         d = np.maximum(np.diag(A)[free], 1e-12)
@@ -151,13 +165,12 @@ def bounded_levenberg_marquardt(
             break
         small_step = np.all(np.abs(x_new - x) <= tolerance * (np.abs(x) + 1e-3))
         small_gain = cost - cost_new <= max(tolerance * cost, CHI_SQUARE_TOLERANCE)
-        x, f, cost = x_new, f_new, cost_new
+        x, f, cost, J = x_new, f_new, cost_new, None
         lam = max(lam / shrink, 1e-9)
-        J = jacobian(x, f)
         if small_step or small_gain:
             converged = True
             break
-    return LeastSquaresResult(x=x, fun=f, jac=J, iterations=iteration, success=converged)
+    return LeastSquaresResult(x=x, fun=f, iterations=iteration, success=converged, jacobian=jacobian, known_jac=J)
 
 
 def held_bounds(lower: np.ndarray, upper: np.ndarray, held: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -408,6 +421,31 @@ class OutputError(Estimator):
         first = replace(estimate, parameters=dict(estimate.parameters, **start))
         return self._refine(structure, dataset, first, (), explore=False, held=held, weighted_at=weighted_at)
 
+    def held_point(
+        self, structure: Structure, dataset: Dataset, estimate: Estimate, start: dict, held: tuple, weighted_at: dict
+    ) -> tuple[dict, float]:
+        """``fit_held``'s parameters and cost alone, for a point of a profile whose standard errors and
+        free-run fit nobody reads (neither the last Jacobian nor the free run they need is simulated).
+
+        Parameters
+        ----------
+        structure, dataset, estimate, start, held, weighted_at
+            As ``fit_held``'s.
+
+        Returns
+        -------
+        parameters : dict
+            The refit's parameters (SI units), T1 >= T2 as ``fit_held`` reports them.
+        cost : float
+            Its cost (-2 log-likelihood, up to a constant), ``fit_held``'s ``info['cost']``.
+        """
+        first = replace(estimate, parameters=dict(estimate.parameters, **start))
+        problem, _, result, info = self._search(structure, dataset, first, (), False, held, weighted_at)
+        params = problem.unpack(result.x)[0]
+        if _swapped_time_constants(problem.names, params):
+            params["T1"], params["T2"] = params["T2"], params["T1"]
+        return params, info["cost"]
+
     def shooting_length(self, dataset: Dataset, params: dict) -> float:
         """Seconds per shooting interval for a hull near ``params``.
 
@@ -560,6 +598,19 @@ class OutputError(Estimator):
         first (a cold fit; a warm one, from an estimate of a nearby window, needs neither); the
         parameters named in ``held`` stay at ``first``'s values; ``weighted_at`` (parameters): every
         start weighed with the noise model and Huber weights there (``fit_held``)."""
+        return self._estimate(*self._search(structure, dataset, first, starts, explore, held, weighted_at))
+
+    def _search(
+        self,
+        structure: Structure,
+        dataset: Dataset,
+        first: Estimate,
+        starts: tuple,
+        explore: bool,
+        held: tuple,
+        weighted_at: dict | None,
+    ) -> tuple[ShootingProblem, Estimate, LeastSquaresResult, dict]:
+        """``_refine``'s search: its shooting problem, ``first``, the search's end and its facts."""
         names = structure.free_names
         params0 = structure.clip_to_bounds(first.parameters)
         lower, upper = held_bounds(*structure.bounds(names, dataset), {names.index(n): params0[n] for n in held})
@@ -589,7 +640,7 @@ class OutputError(Estimator):
             "cost_ratio": float(np.sqrt(result.fun @ result.fun / max(len(result.fun) - len(x0), 1))),
             "start_info": {k: v for k, v in first.info.items() if k != "excitation"},
         }
-        return self._estimate(problem, first, result, info)
+        return problem, first, result, info
 
     def _best_start(
         self,
@@ -727,7 +778,7 @@ class OutputError(Estimator):
         flags += [f"at_bound:{n}" for n in at_bound]
         if not result.success:
             flags.append("oe_not_converged")
-        if "T2" in names and params["T2"] > params["T1"]:  # the model is symmetric in them: T1 >= T2
+        if _swapped_time_constants(names, params):
             params["T1"], params["T2"] = params["T2"], params["T1"]
             std_errors["T1"], std_errors["T2"] = std_errors["T2"], std_errors["T1"]
             cumulative["T1"], cumulative["T2"] = cumulative["T2"], cumulative["T1"]
@@ -740,3 +791,8 @@ class OutputError(Estimator):
         info = dict(info, gauss_newton_std={n: float(s) for n, s in zip(names, gauss_newton)})
         estimate = finish_estimate(structure, dataset, self.name, params, std_errors, flags, info)
         return replace(estimate, influence=Influence(dataset.time, cumulative), covariance=covariance)
+
+
+def _swapped_time_constants(names: list, params: dict) -> bool:
+    """Whether a fit's T2 exceeds its T1: the model is symmetric in them, and T1 >= T2 is reported."""
+    return "T2" in names and params["T2"] > params["T1"]

@@ -243,12 +243,11 @@ def profile_slides(estimate, estimator, structure, dataset, name, ladders, of, m
     parameters undetermined (infinite errors)."""
     parameters = estimate.parameters
 
-    def held_at(value):
-        start = dict(moved(value), **{name: value})
-        return estimator.fit_held(structure, dataset, estimate, start, (name,), weighted_at=parameters)
+    def start_at(value):
+        return dict(moved(value), **{name: value})
 
     try:
-        base = held_at(parameters[name])
+        base = estimator.fit_held(structure, dataset, estimate, start_at(parameters[name]), (name,), parameters)
         deflate = {
             q: min(1.0, (base.info["gauss_newton_std"][q] / base.std_errors[q]) ** 2) if base.std_errors[q] > 0 else 1.0
             for q in of
@@ -256,10 +255,10 @@ def profile_slides(estimate, estimator, structure, dataset, name, ladders, of, m
         slides = dict.fromkeys(of, 0.0)
         for ladder in ladders:
             for value in ladder:
-                held = held_at(value)
-                rise = held.info["cost"] - base.info["cost"]
+                held, cost = estimator.held_point(structure, dataset, estimate, start_at(value), (name,), parameters)
+                rise = cost - base.info["cost"]
                 for q in of:
-                    shift = abs(held.parameters[q] - base.parameters[q])
+                    shift = abs(held[q] - base.parameters[q])
                     slides[q] = max(slides[q], shift / max(math.sqrt(max(deflate[q] * rise, 0.0)), Z_95))
                 if rise > PROFILE_CLIMB_CHI2:
                     break

@@ -255,6 +255,7 @@ class _Search:
         self.robust = np.ones(2 * n)  # Huber weights (square roots), fixed at the start
         self.weigh = None  # (psi_err, r_err) -> residual vector: the chosen start's weighting
         self.simulations = 0
+        self._last = None  # (x, substeps, weighting, its weighted residuals): the last single run
 
     def substeps(self, x: np.ndarray) -> int:
         """RK4 substeps per sample at the parameters of the unknowns ``x`` (``fit_substeps``)."""
@@ -264,19 +265,36 @@ class _Search:
         """Weighted residual vectors of several points (rows), simulated in one compiled call;
         ``weighs``: each point's own weighting (default: the search's); a run that diverged gets
         residuals of 1e6."""
+        out = np.full((len(points), 2 * self.problem.dataset.n_samples), 1e6)
+        for k, weighed in enumerate(self._weighed(points, substeps, weighs)):
+            if weighed is not None:
+                out[k] = self.robust * weighed
+        return out
+
+    def _weighed(self, points, substeps: int, weighs) -> list:
+        """Each point's free-run errors through its weighting, before the Huber weights; None for
+        a run that diverged."""
         dataset = self.problem.dataset
         self.simulations += len(points)
         psi, r = self.problem.simulate(points, substeps)
-        out = np.full((len(points), 2 * dataset.n_samples), 1e6)
-        for k in range(len(points)):
-            psi_err, r_err = psi[k] - dataset.heading, r[k] - dataset.yaw_rate
-            if np.all(np.isfinite(psi_err)) and np.all(np.isfinite(r_err)):
-                out[k] = self.robust * (weighs[k] if weighs else self.weigh)(psi_err, r_err)
-        return out
+        psi_err, r_err = psi - dataset.heading, r - dataset.yaw_rate
+        finite = np.all(np.isfinite(psi_err), axis=1) & np.all(np.isfinite(r_err), axis=1)
+        return [
+            (weighs[k] if weighs else self.weigh)(psi_err[k], r_err[k]) if finite[k] else None
+            for k in range(len(points))
+        ]
 
     def residual(self, x: np.ndarray) -> np.ndarray:
-        """The weighted residual vector at the unknowns ``x``."""
-        return self.residuals([x], self.substeps(x))[0]
+        """The weighted residual vector at the unknowns ``x``. The last such run is kept: a search
+        asks again for the point it starts from once its Huber weights are set."""
+        substeps = self.substeps(x)
+        last = self._last
+        if last is not None and last[1] == substeps and last[2] is self.weigh and np.array_equal(last[0], x):
+            weighed = last[3]
+        else:
+            weighed = self._weighed([x], substeps, None)[0]
+            self._last = (x.copy(), substeps, self.weigh, weighed)
+        return np.full(2 * self.problem.dataset.n_samples, 1e6) if weighed is None else self.robust * weighed
 
     def jacobian(self, x: np.ndarray, f0: np.ndarray, chosen=None):
         """Forward differences (``ShootingProblem``), all simulated in one call at the substeps of

@@ -394,7 +394,7 @@ class Estimator:
     name = ""
     uses_starts = False  # True for iterative estimators, which search from the given starts
 
-    def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
+    def fit(self, structure: Structure, dataset: Dataset, starts: tuple = (), warm: bool = False) -> Estimate:
         """Fit ``structure`` to ``dataset``, searching also from ``starts``.
 
         Parameters
@@ -405,6 +405,9 @@ class Estimator:
             The data: rudder, heading, yaw rate (rad, rad/s) on a uniform grid, split at gaps.
         starts : tuple of dict
             Parameter sets (SI units) a search also starts from (the last window's estimate, ...).
+        warm : bool
+            ``starts[0]`` is the estimate of this model on a nearby window (an online refit): a search
+            may start from the starts alone.
 
         Returns
         -------
@@ -469,8 +472,8 @@ class RegressionEstimator(Estimator):
             )
         return regression
 
-    def fit(self, structure: Structure, dataset: Dataset, starts: tuple = ()) -> Estimate:
-        """The regression's closed-form fit: it has no search, so it ignores ``starts``.
+    def fit(self, structure: Structure, dataset: Dataset, starts: tuple = (), warm: bool = False) -> Estimate:
+        """The regression's closed-form fit: it has no search, so it ignores ``starts`` and ``warm``.
 
         The coefficients map back to physical parameters (``parameters_from_coefficients``); their
         standard errors come from the solution's covariance by the delta method, the residual variance
@@ -484,6 +487,8 @@ class RegressionEstimator(Estimator):
             The data: rudder, heading, yaw rate (rad, rad/s) on a uniform grid, split at gaps.
         starts : tuple of dict
             Parameter sets (SI units) a search also starts from (the last window's estimate, ...).
+        warm : bool
+            Whether ``starts[0]`` is a nearby window's estimate (no search here: unused).
 
         Returns
         -------

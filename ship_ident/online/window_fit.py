@@ -77,7 +77,7 @@ def fit_window(config, structure, dataset, last_good) -> WindowFit | Verdict:
     try:
         estimate = None
         if last_good is not None and last_good.ok and last_good.method == config.method:
-            estimate = estimator.fit(structure, dataset, starts=(last_good.parameters,))  # warm start
+            estimate = estimator.fit(structure, dataset, starts=(last_good.parameters,), warm=True)
         if estimate is None or any(f in RETRY_COLD_FLAGS for f in estimate.flags):
             # none, or the vessel changed beyond the warm start's reach, or the search crawled
             # along a valley from it: fit afresh (exploring time scales), keep the better search

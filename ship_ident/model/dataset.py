@@ -352,20 +352,13 @@ def resample_signals(
             gaps.append((float(a), float(b)))
             valid &= ~((grid > a) & (grid < b))
     out = {name: on_grid(s, v, grid, sample_time) for name, (s, v) in clean.items()}
-    segments, i, n = [], 0, len(grid)
-    while i < n:
-        if not valid[i]:
-            i += 1
-            continue
-        j = i
-        while j < n and valid[j]:
-            j += 1
-        segments.append((i, j))
-        i = j
+    edges = np.diff(np.concatenate(([0], valid.astype(np.int8), [0])))  # +1 where a run of valid points starts
     keep_idx = np.flatnonzero(valid)
-    remap = np.full(n, -1)
+    remap = np.full(len(grid), -1)
     remap[keep_idx] = np.arange(len(keep_idx))
-    segments = [(int(remap[a]), int(remap[b - 1]) + 1) for a, b in segments]
+    segments = [
+        (int(remap[a]), int(remap[b - 1]) + 1) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))
+    ]
     gaps = sorted(set(gaps))
     return grid[keep_idx], {name: values[keep_idx] for name, values in out.items()}, tuple(segments), tuple(gaps)
 

@@ -213,14 +213,17 @@ class ShootingProblem:
             the step as represented (x + h - x, not h: no rounding error of order eps |x| / h).
         """
         p = self.n_params
-        values = np.zeros(columns.shape)
         m, varied = len(chosen), list(chosen)
-        values[:, varied] = (differences[:m] / (np.array(points)[:, varied].diagonal() - x[varied])[:, None]).T
-        values[:, p:] = differences[m:].T / steps[columns[:, p:]]
+        parameter_values = (differences[:m] / (np.array(points)[:, varied].diagonal() - x[varied])[:, None]).T
+        state_values = differences[m:].T / steps[columns[:, p:]]
         shape = (len(columns), len(x))
         if sparse_matrix:
+            values = np.zeros(columns.shape)
+            values[:, varied] = parameter_values
+            values[:, p:] = state_values
             row_starts = np.arange(0, values.size + 1, columns.shape[1])
             return sparse.csr_matrix((values.ravel(), columns.ravel(), row_starts), shape=shape)
-        dense = np.zeros(shape)
-        np.put_along_axis(dense, columns, values, axis=1)
+        dense = np.zeros(shape)  # the parameters' columns are the first p
+        dense[:, varied] = parameter_values
+        np.put_along_axis(dense, columns[:, p:], state_values, axis=1)
         return dense

@@ -454,8 +454,10 @@ class OutputError(Estimator):
     def held_point(
         self, structure: Structure, dataset: Dataset, estimate: Estimate, start: dict, held: tuple, weighted_at: dict
     ) -> tuple[dict, float]:
-        """``fit_held``'s parameters and cost alone, for a point of a profile whose standard errors and
-        free-run fit nobody reads (neither the last Jacobian nor the free run they need is simulated).
+        """The parameters and cost of one point of a profile: ``fit_held`` without its standard errors.
+
+        For the points of a profile whose standard errors and free-run fit nobody reads: neither the
+        search's last Jacobian nor the free run they need is simulated.
 
         Parameters
         ----------

@@ -34,9 +34,9 @@ def test_nothing_hidden_on_a_slow_ship_is_not_a_missing_effect():
 
 
 def test_a_long_rudder_delay_on_a_quick_boat_is_found():
-    """The issue's worst miss: a 1.9 s dead time on a boat with T1 = 3.8 s and T3 = 0.07 s hid in
-    T2 and T3 (T1 = T2 = 2.9 s, T3 = 0) and the search from tau = 0 stopped at 0.7 s; the dead
-    time profiled over a grid finds it and removes most of the held-out error."""
+    """A 1.9 s dead time on a boat with T1 = 3.8 s and T3 = 0.07 s: fitted without it, the delay
+    hides in T2 and T3 (T1 = T2 = 2.9 s, T3 = 0), where a search from tau = 0 stops at 0.7 s; the
+    dead time profiled over a grid is found and removes most of the held-out error."""
     vessel = Vessel(
         "quick",
         "a quick boat with a long steering dead time",

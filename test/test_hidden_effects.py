@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ship_ident.bench.hidden_effects import run_case
+from ship_ident.bench.hidden_effects import draw_case, run_case
 from ship_ident.diagnosis.diagnose import diagnose
 from ship_ident.model.simulator import Vessel, simulate
 
@@ -34,9 +34,9 @@ def test_nothing_hidden_on_a_slow_ship_is_not_a_missing_effect():
 
 
 def test_a_long_rudder_delay_on_a_quick_boat_is_found():
-    """The issue's worst miss: a 1.9 s dead time on a boat with T1 = 3.8 s and T3 = 0.07 s hid in
-    T2 and T3 (T1 = T2 = 2.9 s, T3 = 0) and the search from tau = 0 stopped at 0.7 s; the dead
-    time profiled over a grid finds it and removes most of the held-out error."""
+    """A 1.9 s dead time on a boat with T1 = 3.8 s and T3 = 0.07 s: fitted without it, the delay
+    hides in T2 and T3 (T1 = T2 = 2.9 s, T3 = 0), where a search from tau = 0 stops at 0.7 s; the
+    dead time profiled over a grid is found and removes most of the held-out error."""
     vessel = Vessel(
         "quick",
         "a quick boat with a long steering dead time",
@@ -64,10 +64,29 @@ def test_a_gyro_bias_on_a_slow_ship_is_judged_against_the_refitted_model():
     assert row["verdict"] == "missing_effect"
 
 
+def delay_candidate(seed: int):
+    """The rudder_delay candidate of ``diagnose`` on the case hiding a rudder delay drawn from ``seed``,
+    and the case's truth."""
+    _, _, sim = draw_case(seed, ("rudder_delay",))
+    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
+    return next(c for c in result.candidates if c.effect == "rudder_delay"), result, sim.truth
+
+
 def test_a_long_rudder_delay_on_a_slow_ship_is_found():
-    """A 4.3 s dead time on a ship with T1 = 16.9 s and T3 = 8.6 s (20/20 zigzag): the model is
-    rebased, and the delay's candidate, refitted from the rebased model (not the first minimum),
-    removes most of the held-out heading error (measured: 61 %, before: 5 % worse)."""
-    row = run_case(795728401, ("rudder_delay",))
-    print(row)
-    assert row["named_first_alone"] and row["top_improvement"] > 0.5
+    """A 4.3 s dead time on a ship with T1 = 16.9 s and a 8.6 s rudder lead (20/20 zigzag): the model
+    without the delay shows their difference, and the delay's candidate, started with the lead given
+    back, recovers the hull (measured: tau 4.34 s, T3 8.45 s, T1 16.8 s)."""
+    candidate, _, truth = delay_candidate(795728401)
+    for name in ("K", "T1", "T3", "tau"):
+        assert candidate.estimate.parameters[name] == pytest.approx(truth[name], rel=0.05), name
+
+
+def test_a_rudder_delay_beside_a_rudder_lead_on_a_usv_is_named_and_fixed():
+    """A 0.73 s dead time on a USV with a 1.37 s rudder lead (random steps): fitted without it, the
+    model pins T3 at 0; a search from the model with the delay added alone stops at a fifth of the
+    delay (8 % of the error removed). Started with the lead given back, it finds the hull and the
+    delay is named missing (measured: 57 % of the held-out yaw-rate error removed)."""
+    candidate, result, truth = delay_candidate(478660289)
+    assert result.verdict == "missing_effect" and result.candidates[0] is candidate
+    assert candidate.improvement_yaw_rate > 0.5
+    assert candidate.estimate.parameters["tau"] == pytest.approx(truth["tau"], rel=0.05)

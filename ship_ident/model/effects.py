@@ -471,6 +471,17 @@ class CubicYaw(Effect):
 DELAY_GRID_POINTS = 10  # rudder delays profiled before the local refinement
 
 
+def lead_compensated(nested: dict, tau: float) -> dict | None:
+    """The parameters of a model fitted without a rudder dead time ``tau`` (s) with the delay added
+    and the lead it hid in given back: T3 + tau on nomoto2, T - tau on nomoto1 (at least a tenth of
+    T); None for a form without either (the acceleration form)."""
+    if "T3" in nested:
+        return dict(nested, T3=nested["T3"] + tau, tau=tau)
+    if "T" in nested:
+        return dict(nested, T=max(nested["T"] - tau, 0.1 * nested["T"]), tau=tau)
+    return None
+
+
 class RudderDelay(Effect):
     name = "rudder_delay"
     explanation = (
@@ -488,7 +499,13 @@ class RudderDelay(Effect):
         whichever is longer) up to that time constant (at most the 5 s bound); at each delay the
         model without it is refitted by regression on the delayed rudder. A delay of a few seconds
         otherwise hides in T2 and T3 (a lag looks like a slow second pole), and the search from
-        tau = 0 stays there."""
+        tau = 0 stays there.
+
+        Each delay also starts from the model without it with its lead given back
+        (``lead_compensated``): at low frequencies a dead time and a rudder lead cancel,
+        exp(-tau s) (1 + T3 s) ~ 1 + (T3 - tau) s, so a model fitted without the delay shows the
+        lead T3 - tau (or, on nomoto1, the time constant T + tau); a search started at the delay
+        with the lead it had stays in that valley, at a fraction of the true delay."""
         data, nested = context.training, context.nested
         upper = self.parameters[0].upper
         time_constant = yaw_time_constant(nested)
@@ -498,6 +515,9 @@ class RudderDelay(Effect):
         for tau in np.geomspace(shortest, longest, DELAY_GRID_POINTS):
             delayed = replace(data, rudder=self.effective_rudder(data.time, data.rudder, {"tau": tau}))
             out.append(dict(context.refit(delayed), tau=float(tau)))
+            compensated = lead_compensated(nested, float(tau))
+            if compensated is not None:
+                out.append(compensated)
         return out
 
     def evidence(self, context):

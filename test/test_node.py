@@ -16,6 +16,7 @@ from ship_ident.commands.play import Player
 from ship_ident.io.files import read_samples, write_simulation
 from ship_ident.model.simulator import simulate
 from ship_ident.ros.demo import Listener, ros_environment, shut_down, start_node, start_play, stop
+from ship_ident.ros.node import TICKS_PER_REFIT
 
 pytestmark = [pytest.mark.slow, pytest.mark.node]  # every test here starts the node over real DDS
 
@@ -51,29 +52,33 @@ def node_process(env, *parameters):
     )
 
 
-LAST_REFIT_TIMEOUT = 120.0  # s of wall time for the node to catch up with a bag that has ended
+LAST_REFIT_TIMEOUT = 120.0  # s of wall time for the node to catch up with the clock
 REFIT_PERIOD = 5.0  # s, the node's default
+# s: /clock at most two refits and a tick past the node's newest (a refit due while the previous one
+# still runs is skipped, so the next record can be two periods on)
+PLAY_LEAD = 2 * REFIT_PERIOD + REFIT_PERIOD / TICKS_PER_REFIT
 
 
 def played_to_the_end(env, domain_id, path, rate: float, while_running=None):
-    """The node (defaults) and a listener while ``path`` plays at ``rate``, until the node has
-    published its refit of the bag's end (one a refit period from it at least): paced by the node's
-    progress, not by the machine keeping the play rate. ``while_running(listener)`` runs then, the
-    node still up; it shuts down cleanly after. The listener."""
-    end = read_samples(path)[-1].time
+    """The node (defaults) and a listener while ``path`` plays at up to ``rate`` x real time, until
+    the node has published its refit of the bag's end (one a refit period from it at least): paced
+    by the node's progress, not by the machine keeping the play rate (/clock never runs more than
+    ``PLAY_LEAD`` past the node's newest refit). ``while_running(listener)`` runs then, the node
+    still up; it shuts down cleanly after. The listener."""
+    samples = read_samples(path)
+    end = samples[-1].time
     node = node_process(env)
     listener = Listener(domain_id)
-    play = start_play(env, path, rate, stderr=subprocess.PIPE, text=True)
     try:
-        while play.poll() is None:
-            listener.spin(0.2)
-        assert play.returncode == 0, play.stderr.read()
+        player = Player(listener.node)
+        assert player.wait_for_subscribers(20.0)
+        player.play(samples, rate, hold=listener.pace_by_node(PLAY_LEAD, LAST_REFIT_TIMEOUT))
 
         def caught_up():
             return bool(listener.estimates) and listener.estimates[-1]["stamp"] >= end - REFIT_PERIOD
 
         reached = listener.spin(LAST_REFIT_TIMEOUT, caught_up)
-        newest = listener.estimates[-1]["stamp"] if listener.estimates else None
+        newest = listener.newest_refit()
         assert reached, (
             f"the node's newest refit is at {newest} s of the bag's {end:g} s after {LAST_REFIT_TIMEOUT:g} s"
         )
@@ -81,7 +86,7 @@ def played_to_the_end(env, domain_id, path, rate: float, while_running=None):
         if while_running is not None:
             while_running(listener)
     finally:
-        code, log = shut_down(node, listener, play)
+        code, log = shut_down(node, listener)
     assert code == 0, log
     return listener
 

@@ -75,11 +75,15 @@ class Player:
             time.sleep(0.02)
         return True
 
-    def play(self, samples, rate: float = 1.0, loop: bool = False) -> None:
+    def play(self, samples, rate: float = 1.0, loop: bool = False, hold=None) -> None:
         """Publish time-ordered samples at ``rate`` x real time, /clock before each stamp, half-way
         from the previous one: /clock and the inputs are separate topics, which DDS does not order
         between them; published together, an input overtaking its clock message was stamped with
-        the previous reading by a node stamping on arrival, and rejected as a duplicate."""
+        the previous reading by a node stamping on arrival, and rejected as a duplicate.
+
+        ``hold(stamp)``, when given, is called before each new /clock stamp (s) and may block, e.g.
+        until a node has caught up with the clock: the play then goes on at ``rate`` from where it
+        was held, so a slow subscriber slows the play instead of falling behind it."""
         if rate <= 0:
             raise ValueError(f"--rate must be > 0, got {rate}")
         start, stop = samples[0].time, samples[-1].time
@@ -97,6 +101,10 @@ class Player:
             for sample in samples:
                 stamp = sample.time + offset
                 if stamp != clock:
+                    if hold is not None:
+                        held = time.monotonic()
+                        hold(stamp)
+                        wall0 += time.monotonic() - held
                     wait_until(stamp if clock is None else (clock + stamp) / 2)
                     self.publish_clock(stamp)
                     wait_until(stamp)

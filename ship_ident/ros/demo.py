@@ -101,6 +101,9 @@ def shut_down(node: subprocess.Popen, listener, *feeders: subprocess.Popen | Non
     return code, out
 
 
+HOLD_CALLBACKS = 5  # the node's outputs a pacing hold processes per /clock stamp (its stream: about one)
+
+
 class Listener:
     """An in-process rclpy node on its own context that collects the identifier's outputs."""
 
@@ -160,6 +163,30 @@ class Listener:
             if until is not None and until():
                 return True
         return until is None
+
+    def newest_refit(self) -> float | None:
+        """The stamp (s, node clock) of the newest estimate record received, None before the first."""
+        return self.estimates[-1]["stamp"] if self.estimates else None
+
+    def pace_by_node(self, lead: float, timeout: float):
+        """A ``Player.play`` hold that keeps /clock at most ``lead`` s (simulated) past the node's
+        newest refit, waiting up to ``timeout`` s of wall time for the node to catch up (and
+        processing the node's outputs meanwhile): a node starved of CPU slows the play, not loses
+        samples stamped on arrival. Raises TimeoutError saying how far the node got."""
+
+        def hold(stamp: float) -> None:
+            for _ in range(HOLD_CALLBACKS):
+                self.executor.spin_once(timeout_sec=0)
+            newest = self.newest_refit()
+            if newest is None or stamp - newest <= lead:
+                return
+            if not self.spin(timeout, lambda: stamp - self.newest_refit() <= lead):
+                raise TimeoutError(
+                    f"the node's newest refit is at {self.newest_refit():g} s, the clock at {stamp:g} s, "
+                    f"after {timeout:g} s of waiting"
+                )
+
+        return hold
 
     def close(self) -> None:
         import rclpy

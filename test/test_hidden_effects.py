@@ -90,3 +90,46 @@ def test_a_rudder_delay_beside_a_rudder_lead_on_a_usv_is_named_and_fixed():
     assert result.verdict == "missing_effect" and result.candidates[0] is candidate
     assert candidate.improvement_yaw_rate > 0.5
     assert candidate.estimate.parameters["tau"] == pytest.approx(truth["tau"], rel=0.05)
+
+
+def damping_diagnosis(seed: int, hidden: str):
+    """The diagnosis of a damping law hidden on a vessel drawn from ``seed``, and its true parameters."""
+    _, _, sim = draw_case(seed, (hidden,))
+    return diagnose(sim.dataset, "nomoto2", (), workers=1), sim.truth
+
+
+def test_a_quadratic_damping_on_a_usv_is_named_before_the_cubic_laws():
+    """Random steps on a USV with cross-flow drag: refitted alone, the cubic law and the course
+    instability each remove 70 % of the held-out error and the quadratic law 62 %, nearly one model.
+    The fit holding both laws carries the damping in its quadratic term, so quadratic_yaw is named
+    first, the cubic laws beside it as near-equivalent, and its linear damping within 15 % of the truth."""
+    result, truth = damping_diagnosis(861563203, "quadratic_yaw")
+    first = result.candidates[0]
+    assert first.effect == "quadratic_yaw" and {"cubic_yaw", "course_instability"} <= set(first.near_equivalent)
+    law = first.damping_law
+    assert law.laws == ("quadratic_yaw",) and law.quadratic > 2 * law.cubic
+    assert law.linear_damping == pytest.approx(truth["a1"], rel=0.15)
+    assert "quadratic term" in law.sentence()
+
+
+def test_a_cubic_damping_on_a_course_stable_ship_is_named_before_the_quadratic_law():
+    """Random steps on a ship (T1 18 s) whose damping grows with the turn rate cubed: the three laws
+    remove 65-67 % each, the quadratic one the most. The fit holding both puts the growth in the cubic
+    term with a positive linear damping (course-stable), so cubic_yaw is named, not course_instability."""
+    result, truth = damping_diagnosis(2055341218, "cubic_yaw")
+    first = result.candidates[0]
+    assert first.effect == "cubic_yaw"
+    law = first.damping_law
+    assert law.laws == ("cubic_yaw",) and law.cubic > law.quadratic
+    assert law.linear_damping > 10 * law.linear_damping_std
+
+
+def test_a_course_unstable_usv_keeps_its_name_beside_the_quadratic_law():
+    """A course-unstable USV on a mixed manoeuvre: the quadratic law, with a negative linear damping
+    of its own, is near-equivalent; the fit holding both laws finds the linear damping negative,
+    within 10 % of the truth, and the damping cubic, so course_instability stays first."""
+    result, truth = damping_diagnosis(740706857, "course_instability")
+    first = result.candidates[0]
+    assert first.effect == "course_instability" and "quadratic_yaw" in first.near_equivalent
+    assert first.damping_law.laws == ("course_instability",)
+    assert first.damping_law.linear_damping == pytest.approx(truth["a1"], rel=0.1)

@@ -55,7 +55,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ProcessPoolExecutor
 from copy import copy
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from multiprocessing import get_context
 
 import numpy as np
@@ -68,6 +68,7 @@ from ..model.integrate import forcing as yaw_forcing
 from ..model.metrics import effective_sample_fraction, free_run_fit, signal_metrics
 from ..model.signals import Signals, compute_signals
 from ..model.structure import Structure, nomoto_parameters
+from .damping_law import DAMPING_LAWS, DampingLaw, damping_law
 
 DEFAULT_METHOD = "rlssvm+oe"  # cheap start + output-error refinement: the fits dominate the run time
 TRAINING_FRACTION = 0.65  # first part of the record for fitting, the rest is held out
@@ -150,6 +151,7 @@ class Candidate:
     second_order: dict | None = None  # the nomoto2 fit's figures when it is recommended on nomoto1 (first_order_view)
     # (the first) the near-equivalent candidate it was ranked before, whose parameters the data do not determine
     preferred_over: dict | None = None
+    damping_law: DampingLaw | None = None  # (the first) the law a fit holding both shows (``rank_damping_laws``)
 
     def to_json(self) -> dict:
         return {
@@ -172,6 +174,9 @@ class Candidate:
             "model": None if self.estimate is None else self.estimate.structure.model,
             "second_order": self.second_order,
             "preferred_over": self.preferred_over,
+            "damping_law": None
+            if self.damping_law is None
+            else {**asdict(self.damping_law), "stability": self.damping_law.stability},
         }
 
 
@@ -1248,9 +1253,60 @@ def recommend_determined(
 
 def recommendation_sentence(candidate: Candidate) -> str:
     """Why the diagnosis recommends a candidate in the form it does: on a first-order base model
-    (``first_order_sentence``), before a near-equivalent one (``determined_sentence``); "" when
-    neither applies."""
-    return first_order_sentence(candidate) + determined_sentence(candidate)
+    (``first_order_sentence``), before a near-equivalent one (``determined_sentence``), as the damping
+    law the data show (``DampingLaw.sentence``); "" when none applies."""
+    law = f"; {candidate.damping_law.sentence()}" if candidate.damping_law is not None else ""
+    return first_order_sentence(candidate) + determined_sentence(candidate) + law
+
+
+def rank_damping_laws(
+    candidates: list[Candidate], estimate: Estimate, recorded: Dataset, held_out: Dataset, method: str
+) -> DampingLaw | None:
+    """Put first, in place, the damping law the data show when the held-out free runs cannot tell
+    the laws apart.
+
+    When the first candidate is a yaw damping law (``DAMPING_LAWS``) and another is near-equivalent to
+    it (``mark_near_equivalents``), their order is the scatter of separate searches of nearly one
+    model. The laws differ in the shape of the damping against the turn rate and in the sign of the
+    linear damping, so one fit that holds both (``damping_law``) decides: the first of the group in
+    rank order that the fit's law admits is ranked first, unless it is not significant where the
+    first is.
+
+    Parameters
+    ----------
+    candidates : list of Candidate
+        The candidates, ranked (``ranking``); reordered in place.
+    estimate : Estimate
+        The model the candidates extend.
+    training, held_out : Dataset
+        The training data and the held-out free-run windows.
+    method : str
+        The estimation method (``make_estimator``).
+
+    Returns
+    -------
+    DampingLaw or None
+        The law the fit shows; None when no group of damping laws leads or the fit failed.
+    """
+    if not candidates or candidates[0].effect not in DAMPING_LAWS:
+        return None
+    mark_near_equivalents(candidates, held_out)
+    first = candidates[0]
+    group, first.near_equivalent = [first.effect, *first.near_equivalent], []
+    if sum(name in DAMPING_LAWS for name in group) < 2:
+        return None
+    by_name = {c.effect: c for c in candidates}
+    starts = [
+        by_name[name].estimate.parameters
+        for name in group
+        if name in DAMPING_LAWS and by_name[name].estimate is not None
+    ]
+    law = damping_law(estimate, recorded, starts, method)
+    chosen = next((name for name in group if law is not None and name in law.laws), first.effect)
+    index = next(i for i, c in enumerate(candidates) if c.effect == chosen)
+    if index and not (first.significant and not candidates[index].significant):
+        candidates.insert(0, candidates.pop(index))
+    return law
 
 
 def determined_sentence(candidate: Candidate) -> str:
@@ -1390,7 +1446,10 @@ def diagnose(
     refits = shared_fits(refits, training, method, fitted_windows)
     judged = (held_out, run, fitted_windows, fitted_run)
     candidates = _judge_candidates(names, evidences, refits, judged, estimate, validation is not None)
+    law = rank_damping_laws(candidates, estimate, dataset, held_out, method) if validation is None else None
     recommend_determined(candidates, estimate, training, held_out, run, fitted_windows, fitted_run, method)
+    if law is not None and candidates[0].effect in law.laws:
+        candidates[0].damping_law = law
     mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
     worst = _locate_failures(dataset, training, rest, validation is not None, structure, estimate, before)

@@ -264,3 +264,36 @@ def test_a_quick_boat_whose_yaw_damping_grows_with_the_cube_of_the_turn_rate_is_
     assert after["structure"]["effects"] == ["rudder_offset", "cubic_yaw"] and after["verdict"] != "missing_effect"
     assert after["held_out_error"] <= 1.25 * after["noise_floor"]
     assert after["pooled"]["since"] == "rudder_offset+cubic_yaw came into force"
+
+
+def pooled(model_over_floor: float, candidate_over_floor: float, t: float) -> PooledEvidence:
+    """A pool of one slice of 600 samples whose model error and candidate error are the given
+    multiples of a 0.01 rad/s noise floor, the candidate's t on the squared-error drop ``t``."""
+    samples, floor = 600, 0.01
+    model, candidate = (samples * (ratio * floor) ** 2 for ratio in (model_over_floor, candidate_over_floor))
+    variance = ((model - candidate) / t) ** 2
+    pool = PooledEvidence(["model", "cubic_yaw"])
+    pool.add(
+        {
+            "start": 0.0,
+            "samples": samples,
+            "seconds": 60.0,
+            "squares": [model, candidate],
+            "pair_variance": [[0.0, variance], [variance, 0.0]],
+            "training_gain": [0.0, samples * 0.2],
+            "noise_squares": samples * floor**2,
+        }
+    )
+    return pool
+
+
+def test_a_candidate_that_brings_the_pooled_error_back_to_the_noise_floor_needs_a_t_of_two():
+    """A model error 1.5 times the noise floor that the candidate takes to the floor: significant
+    at t 2.5. The same t on a model error 1.2 times the floor (within the noise margin: the pool
+    shows nothing missing), or from 1.6 to 1.3 floors (19 % removed, short of the floor), is not;
+    t 3 is, as before."""
+    assert pooled(1.5, 1.0, 2.5).significant("cubic_yaw")
+    assert not pooled(1.2, 1.0, 2.5).significant("cubic_yaw")
+    assert not pooled(1.6, 1.3, 2.5).significant("cubic_yaw")
+    assert not pooled(1.5, 1.0, 1.9).significant("cubic_yaw")
+    assert pooled(1.6, 1.3, 3.1).significant("cubic_yaw")

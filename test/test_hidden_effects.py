@@ -133,3 +133,16 @@ def test_a_course_unstable_usv_keeps_its_name_beside_the_quadratic_law():
     assert first.effect == "course_instability" and "quadratic_yaw" in first.near_equivalent
     assert first.damping_law.laws == ("course_instability",)
     assert first.damping_law.linear_damping == pytest.approx(truth["a1"], rel=0.1)
+
+
+def test_a_rudder_delay_half_the_time_constant_on_a_usv_is_found_where_the_fit_without_it_sees_no_hull():
+    """A 3.9 s dead time on a USV with T1 8 s (10/10 zigzag): the model fitted without it answers no
+    rudder at all (K 0, T1 = T2 = 0.01 s), so its time constant bounds no delay. The delays profiled
+    reach the bound all the same, and the delay is named missing with the hull and the delay found."""
+    _, _, sim = draw_case(1273276384, ("rudder_delay",))
+    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
+    first = result.candidates[0]
+    assert result.verdict == "missing_effect" and first.effect == "rudder_delay"
+    assert first.improvement > 0.5
+    assert first.estimate.parameters["tau"] == pytest.approx(sim.truth["tau"], rel=0.1)
+    assert first.estimate.parameters["K"] == pytest.approx(sim.truth["K"], rel=0.1)

@@ -469,6 +469,7 @@ class CubicYaw(Effect):
 
 
 DELAY_GRID_POINTS = 10  # rudder delays profiled before the local refinement
+BEYOND_GRID_POINTS = 3  # ... and from the yaw time constant up to the bound
 
 
 def lead_compensated(nested: dict, tau: float) -> dict | None:
@@ -511,8 +512,11 @@ class RudderDelay(Effect):
         time_constant = yaw_time_constant(nested)
         shortest = min(max(2.0 * data.sample_time, 0.05 * time_constant), upper)
         longest = float(np.clip(time_constant, shortest, upper))
+        grid = np.geomspace(shortest, longest, DELAY_GRID_POINTS)
+        if longest < upper:  # a base fit without the delay can miss the hull: its time constant bounds nothing
+            grid = np.concatenate([grid, np.geomspace(longest, upper, BEYOND_GRID_POINTS + 1)[1:]])
         out = []
-        for tau in np.geomspace(shortest, longest, DELAY_GRID_POINTS):
+        for tau in grid:
             delayed = replace(data, rudder=self.effective_rudder(data.time, data.rudder, {"tau": tau}))
             out.append(dict(context.refit(delayed), tau=float(tau)))
             compensated = lead_compensated(nested, float(tau))

@@ -14,6 +14,7 @@ from ship_ident.estimators.lssvm import (
     lssvm_primal_with_bias,
     ridge_primal,
 )
+from ship_ident.estimators.output_error import fold_inverse
 from ship_ident.model.simulator import simulate
 from ship_ident.model.structure import Structure
 
@@ -219,3 +220,18 @@ def test_a_slow_ship_is_shot_over_intervals_of_its_own_time_scale():
     assert est.ok and est.info["shooting_s"] >= 0.9 * 3 * truth["T1"]
     assert est.parameters["K"] == pytest.approx(truth["K"], rel=0.015)
     assert est.parameters["T1"] == pytest.approx(truth["T1"], rel=0.025)
+
+
+def test_the_covariance_on_the_fold_of_two_equal_poles_keeps_the_rest_determined():
+    """Two unknowns the residuals depend on only through their sum (nomoto2's poles at T1 = T2):
+    their errors are infinite, and the third unknown's variance is that of the model with the
+    sum as one unknown, not rounding spread by a singular inverse."""
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=200), rng.normal(size=200)
+    J = np.column_stack([a, b, b])
+    inverse, free = fold_inverse(J.T @ J)
+    reduced = np.linalg.inv(np.column_stack([a, b]).T @ np.column_stack([a, b]))
+    assert free.tolist() == [False, True, True]
+    assert inverse[0, 0] == pytest.approx(reduced[0, 0], rel=1e-9)
+    full_rank, none_free = fold_inverse(np.column_stack([a, b]).T @ np.column_stack([a, b]))
+    assert not none_free.any() and full_rank == pytest.approx(reduced, rel=1e-9)

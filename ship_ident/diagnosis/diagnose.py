@@ -675,7 +675,7 @@ def parameter_warnings(estimate: Estimate) -> list[dict]:
                     "message": f"{name} is pinned at its {side} bound {bound:g} {p.unit}{hint}",
                 }
             )
-        if not pinned and np.isfinite(std) and std > abs(value):
+        if not pinned and std > abs(value):
             out.append(
                 {
                     "parameter": name,

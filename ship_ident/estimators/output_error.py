@@ -200,10 +200,8 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     share of their variances (``Influence``: n_samples x p, columns summing to one)."""
     from scipy.signal import convolve  # here: scipy.signal takes seconds to import
 
-    try:
-        bread = scaled_inverse(_dense(J.T @ J))[:p]
-    except np.linalg.LinAlgError:
-        return np.full(p, np.inf), np.full(p, np.inf), np.full((n_samples, p), 1.0 / n_samples), None
+    bread, free = fold_inverse(_dense(J.T @ J))
+    bread = bread[:p]
     projected = np.asarray(J @ bread.T)
     squares = projected[:n_samples] ** 2 + projected[n_samples:] ** 2
     shares = squares / np.maximum(squares.sum(axis=0), 1e-300)
@@ -211,7 +209,44 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     lags = np.arange(-min(bandwidth, n_samples - 1), min(bandwidth, n_samples - 1) + 1)
     bartlett = 1.0 - np.abs(lags) / (bandwidth + 1.0)
     meat = u.T @ convolve(u, bartlett[:, None], mode="same")
-    return np.sqrt(np.clip(np.diag(meat), 0, None)), np.sqrt(np.clip(np.diag(bread[:, :p]), 0, None)), shares, meat
+    unknown = np.where(free[:p], np.inf, 0.0)  # along a direction the data do not see at all
+    hac, plain = (np.sqrt(np.clip(v, 0, None)) + unknown for v in (np.diag(meat), np.diag(bread[:, :p])))
+    return hac, plain, shares, meat
+
+
+NULL_EIGENVALUE = 1e-13  # of the unit-diagonal normal matrix: a direction the residuals do not depend on
+
+
+def fold_inverse(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The inverse of a normal matrix J'J on the directions the residuals depend on, and which
+    unknowns have a part along one they do not.
+
+    Where the model is symmetric in two parameters (nomoto2's poles at T1 = T2: the response
+    1 / ((1 + T1 s)(1 + T2 s)) does not change to first order when they split) J'J is singular, and
+    its inverse would spread rounding over every error; the gain and the other parameters are still
+    determined. Eigen-directions below ``NULL_EIGENVALUE`` (of the matrix scaled to a unit
+    diagonal) are left out of the inverse, and the unknowns with a part along them are flagged:
+    their errors are infinite.
+
+    Parameters
+    ----------
+    normal : ndarray
+        A symmetric positive semi-definite matrix J'J.
+
+    Returns
+    -------
+    inverse : ndarray
+        Its inverse on the determined directions (the pseudo-inverse there).
+    free : ndarray of bool
+        The unknowns with a part along an undetermined direction.
+    """
+    scale = np.sqrt(np.maximum(np.diag(normal), 1e-300))
+    values, vectors = np.linalg.eigh(normal / np.outer(scale, scale))
+    null = values < NULL_EIGENVALUE * max(values[-1], 1e-300)
+    kept = vectors[:, ~null]
+    inverse = (kept / values[~null]) @ kept.T / np.outer(scale, scale)
+    free = np.sum(vectors[:, null] ** 2, axis=1) > 1e-6
+    return inverse, free
 
 
 HUBER_THRESHOLD = 5.0  # robust standard deviations beyond which a residual counts linearly

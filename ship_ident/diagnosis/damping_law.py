@@ -7,7 +7,7 @@ held-out part within a few per cent of the others, and that order is the scatter
 What separates them is the shape of the damping against the turn rate and the sign of the linear
 damping. ``damping_law`` fits one model that holds both laws and a linear damping of either sign,
 ``-a1 r - d_q r|r| - a3 r^3`` beside the base model, and reads them there: the law whose term carries
-more of the damping over the training turn rates (signed: a term that lowers the damping is not a
+more of the damping over the turn rates of the fitted data (signed: a term that lowers the damping is not a
 damping law), and, for the cubic law, the sign of a1 where the fit determines it.
 """
 
@@ -35,7 +35,7 @@ class DampingLaw:
         The effects consistent with it: ``("quadratic_yaw",)``, ``("cubic_yaw",)``,
         ``("course_instability",)``, or both cubic ones when the sign of a1 is not determined.
     quadratic, cubic : float
-        The RMS yaw acceleration (rad/s^2) of the quadratic and cubic damping terms over the training
+        The RMS yaw acceleration (rad/s^2) of the quadratic and cubic damping terms over the fitted
         turn rates, signed: positive damps.
     linear_damping, linear_damping_std : float
         a1 (1/s) and its standard error; negative is course-unstable.
@@ -77,14 +77,14 @@ class DampingLaw:
         )
 
 
-def damping_law(estimate: Estimate, training: Dataset, starts: list[dict], method: str) -> DampingLaw | None:
+def damping_law(estimate: Estimate, recorded: Dataset, starts: list[dict], method: str) -> DampingLaw | None:
     """Fit the model that holds both damping laws and read which one the data show.
 
     Parameters
     ----------
     estimate : Estimate
         The model the damping laws would extend (its base model and effects).
-    training : Dataset
+    recorded : Dataset
         The data to fit (s, rad, rad/s).
     starts : list of dict
         Fitted parameters of the model with one law each (either form, SI units); the search also
@@ -102,11 +102,11 @@ def damping_law(estimate: Estimate, training: Dataset, starts: list[dict], metho
         {name: value for name, value in joint.neutral_effect_start(p).items() if name in joint.parameter_names}
         for p in (*starts, estimate.parameters)
     ]
-    fit = make_estimator(method, explore=False).fit(joint, training, starts=tuple(points))
+    fit = make_estimator(method, explore=False).fit(joint, recorded, starts=tuple(points))
     if not fit.ok:
         return None
     p, std = fit.parameters, fit.std_errors
-    r = training.yaw_rate
+    r = recorded.yaw_rate
     quadratic = p["d_q"] * float(np.sqrt(np.mean((r * np.abs(r)) ** 2)))
     cubic = p["a3"] * float(np.sqrt(np.mean(r**6)))
     a1, a1_std = float(p["a1"]), float(std.get("a1", np.inf))

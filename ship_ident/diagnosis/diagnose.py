@@ -1278,8 +1278,10 @@ def rank_damping_laws(
         The candidates, ranked (``ranking``); reordered in place.
     estimate : Estimate
         The model the candidates extend.
-    training, held_out : Dataset
-        The training data and the held-out free-run windows.
+    recorded : Dataset
+        The whole record (training and held-out part): the law is read from all of it.
+    held_out : Dataset
+        The held-out free-run windows (the near-equivalent group is judged on them).
     method : str
         The estimation method (``make_estimator``).
 

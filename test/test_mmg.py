@@ -12,18 +12,14 @@ from ship_ident.bench import mmg  # noqa: E402
 from ship_ident.bench.hidden_effects import render, run  # noqa: E402
 from ship_ident.cli import main  # noqa: E402
 from ship_ident.diagnosis.diagnose import (  # noqa: E402
-    CLEAR_TRAINING_GAIN,
     DEFAULT_METHOD,
     EQUIVALENT_MARGIN,
-    MIN_TRAINING_GAIN,
-    SIGNIFICANCE_T,
     _fit,
     first_order_sentence,
     first_order_view,
     free_run,
     held_out_window,
     judge,
-    judge_across_manoeuvres,
     recommend_determined,
     recommendation_sentence,
     residual_context,
@@ -166,11 +162,10 @@ def test_a_tanker_whose_rudder_stall_runs_to_its_bound_is_recommended_the_cubic_
 
 
 @pytest.mark.slow
-def test_a_rudder_stall_that_shows_only_in_the_held_out_turns_is_missing_across_manoeuvres():
+def test_a_rudder_stall_that_shows_in_the_held_out_turns_is_missing():
     """A course-stable KVLCC2-like hull (linear yaw damping 1.4 times KVLCC2's, a large rudder): on the
-    held-out zigzags and turning circle rudder_stall removes 52 % of the heading and 35 % of the
-    yaw-rate error, t 1.5, but its training steps only 6 % better than without it: the tail of one
-    record would not credit that, other manoeuvres do (``judge_across_manoeuvres``)."""
+    held-out zigzags and turning circle rudder_stall removes half the heading error, and its
+    training steps run better too: significant."""
     hull = mmg.random_hull(np.random.default_rng(954239507))
     training, held_out = mmg.hull_recordings(hull, 954239507)
     base = _fit(Structure("nomoto2"), training, DEFAULT_METHOD)
@@ -181,10 +176,8 @@ def test_a_rudder_stall_that_shows_only_in_the_held_out_turns_is_missing_across_
     evidence = EFFECTS["rudder_stall"].evidence(residual_context(base.structure, base.parameters, training))
     fit = _fit(Structure("nomoto2", ("rudder_stall",)), training, DEFAULT_METHOD, base.parameters)
     stall = judge("rudder_stall", evidence, held_windows, run, fit, training_windows, training_run)
-    assert not stall.significant and stall.t_statistic < SIGNIFICANCE_T
-    assert stall.improvement_heading >= 0.5 and MIN_TRAINING_GAIN <= stall.training_gain < CLEAR_TRAINING_GAIN
-    judge_across_manoeuvres([stall])
-    assert stall.significant
+    print(stall.improvement_heading, stall.improvement_yaw_rate, stall.t_statistic, stall.training_gain)
+    assert stall.significant and stall.improvement_heading >= 0.5  # measured: 54 %, training 13 %
 
 
 @pytest.mark.slow

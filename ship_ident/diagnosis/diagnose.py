@@ -82,6 +82,9 @@ MIN_HELD_OUT_S = 30.0  # s
 HELD_OUT_WINDOW_TIME_CONSTANTS = 40.0  # held-out free-run windows last this many yaw time constants ...
 HELD_OUT_WINDOW_MIN_S = 60.0  # ... but at least this long (s)
 HELD_OUT_MIN_WINDOWS = 3  # ... and short enough for this many independent free runs
+STATE_FIT_TIME_CONSTANTS = 0.5  # a free run's initial yaw rate and acceleration: fitted over this many of
+STATE_FIT_MAX_S = 20.0  # the model's yaw time constants, at most this long (s), and over at least
+STATE_FIT_MIN_SAMPLES = 5  # this many samples (``measured_states``)
 WORST_WINDOW_TIME_CONSTANTS = 20.0  # worst-segment windows: this many time constants, 30-60 s
 WORST_WINDOW_LIMITS_S = (30.0, 60.0)
 WORST_SEGMENTS = 5
@@ -167,6 +170,7 @@ class Candidate:
             "improves_most": self.signal,
             "evidence_score": self.evidence.score,
             "parameters": None if self.estimate is None else {k: float(v) for k, v in self.estimate.parameters.items()},
+            "undetermined": [] if self.estimate is None else undetermined(self.estimate),
             "note": self.note,
             "extrapolation": self.extrapolation,
             "training_gain": self.training_gain,
@@ -347,6 +351,52 @@ def windows(dataset: Dataset, length_s: float) -> Dataset:
     return replace(dataset, segments=cut_segments(dataset.segments, step, min_samples=2))
 
 
+def measured_states(structure: Structure, parameters: dict, dataset: Dataset) -> list:
+    """Each segment's initial state as the measurements give it: heading, yaw rate and yaw acceleration.
+
+    A second-order model's state holds the yaw acceleration. A window that starts in a turn starts
+    accelerating, and a run started at rest in yaw acceleration (and from one noisy yaw-rate
+    sample) carries a transient whose heading error it integrates to the window's end: on a quick
+    USV's 20-degree zigzag that alone makes the true model's held-out heading error 3 deg (0.5 deg
+    from the measured state), and a first-order candidate, free of that state, would pass for a
+    missing effect. The yaw rate and its rate are the least-squares quadratic of the measured yaw
+    rate over the segment's first ``STATE_FIT_TIME_CONSTANTS`` of the model's own yaw time constant:
+    a slow hull's second pole turns an error of the yaw acceleration into a long transient, so it
+    takes the longer average, while a quick hull's turn curves within it. The span is at most
+    ``STATE_FIT_MAX_S`` and half the segment: a tanker's time constant is minutes, its zigzag's
+    yaw rate turns within them, and a quadratic over minutes would miss the turn (on KVLCC2's 20/20
+    zigzag the free-run heading error grows by half). The heading is the first sample's.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model run (its gyro bias is taken off the measured yaw rate).
+    parameters : dict
+        Its parameters (SI units).
+    dataset : Dataset
+        The data cut into windows (segments).
+
+    Returns
+    -------
+    list of tuple
+        Per segment (heading rad, yaw rate rad/s, yaw acceleration rad/s^2).
+    """
+    bias = structure.yaw_rate_bias(parameters)
+    fit_s = min(STATE_FIT_TIME_CONSTANTS * yaw_time_constant(parameters), STATE_FIT_MAX_S)
+    fit_samples = max(STATE_FIT_MIN_SAMPLES, int(round(fit_s / dataset.sample_time)))
+    states = []
+    for a, b in dataset.segments:
+        n = min((b - a) // 2, fit_samples)
+        if n < STATE_FIT_MIN_SAMPLES:
+            states.append((dataset.heading[a], dataset.yaw_rate[a] - bias, 0.0))
+            continue
+        rate, acceleration = np.polynomial.polynomial.polyfit(
+            dataset.time[a : a + n] - dataset.time[a], dataset.yaw_rate[a : a + n], 2
+        )[:2]
+        states.append((dataset.heading[a], rate - bias, acceleration))
+    return states
+
+
 def held_out_window(parameters: dict, held_out_s: float) -> float:
     """Length (s) of the held-out free-run windows: ``HELD_OUT_WINDOW_TIME_CONSTANTS`` yaw time
     constants, but short enough for ``HELD_OUT_MIN_WINDOWS`` windows in the longest held-out
@@ -386,14 +436,14 @@ def free_run(structure: Structure, parameters: dict, dataset: Dataset) -> FreeRu
     parameters : dict
         Its parameters (SI units).
     dataset : Dataset
-        The data; each segment's run starts from the measured state at its first sample.
+        The data; each segment's run starts from its measured state (``measured_states``).
 
     Returns
     -------
     FreeRun
         Heading (rad) and yaw rate (rad/s) of the runs, with the data they are judged on.
     """
-    heading, yaw_rate = structure.simulate(parameters, dataset)
+    heading, yaw_rate = structure.simulate(parameters, dataset, measured_states(structure, parameters, dataset))
     return FreeRun(heading, yaw_rate, free_run_fit(dataset.heading, dataset.yaw_rate, heading, yaw_rate))
 
 

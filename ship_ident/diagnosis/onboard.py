@@ -699,7 +699,8 @@ class OnlineDiagnosis:
         if pool is None:  # nothing fresh held out yet: the window's own verdict stands
             result["add_command"] = None
             return None
-        found, reversal = self._name(pool)
+        undetermined = {c["effect"] for c in result["candidates"] if c.get("undetermined")}
+        found, reversal = self._name(pool, undetermined)
         self._mark(result, pool, found)
         result["pooled"] = pool.summary(self._origin)
         effects = structure[1]
@@ -732,9 +733,10 @@ class OnlineDiagnosis:
             self._verdict_without(result, pool, rests_on, ratio)
         return self._auto_add(result, found, effects, config)
 
-    def _name(self, pool: PooledEvidence) -> tuple[str | None, str]:
+    def _name(self, pool: PooledEvidence, undetermined: set) -> tuple[str | None, str]:
         """The effect the pool names missing (None: none) and, when it differs from the one named
-        before, why (the pooled evidence reversed)."""
+        before, why (the pooled evidence reversed); ``undetermined``: the candidates whose fit in the
+        newest window leaves a parameter undetermined (``_determined_lead``)."""
         ranked = sorted((n for n in pool.names[1:] if pool.significant(n)), key=lambda n: -pool.rank(n))
         named, reversal = self._named, ""
         if named is not None and pool.holds(named):
@@ -752,11 +754,23 @@ class OnlineDiagnosis:
                     f"{100 * pool.improvement(named):.0f} % (t {pool.t_statistic(MODEL, named):.1f}), "
                     "not significantly"
                 )
-            named = ranked[0]
+            named = self._determined_lead(pool, ranked[0], undetermined)
         else:
             return None, ""
         self._named = named
         return named, reversal
+
+    @staticmethod
+    def _determined_lead(pool: PooledEvidence, leader: str, undetermined: set) -> str:
+        """``leader``, or, when its fit leaves a parameter undetermined, the first of its pooled
+        near-equivalents that is significant and determined. The data do not tell them apart, and an
+        effect added with a parameter the data leave free gives the online estimate a free direction
+        (nothing published): a rudder offset on a zigzag about one heading is a wind moment whose
+        heading harmonics that sector cannot separate."""
+        if leader not in undetermined:
+            return leader
+        determined = (n for n in pool.equivalents(leader) if n not in undetermined and pool.significant(n))
+        return next(determined, leader)
 
     @staticmethod
     def _shares(pool: PooledEvidence, group: list[str]) -> str:

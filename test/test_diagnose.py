@@ -245,7 +245,7 @@ def test_kvlcc2_walk_through(tmp_path, capsys):
     )
     assert record["verdict"] == "missing_effect" and record["diagnosis"]["held_out"]["windows"] == 6
     # the yaw damping laws bend the zigzags' turns alike: one group, and each law's fit in the acceleration
-    # form says the hull is course-unstable (a1 < 0); measured: quadratic_yaw 64 %, t 3.4, course_instability beside
+    # form says the hull is course-unstable (a1 < 0); measured: course_instability 73 %, t 3.2, quadratic_yaw 70 %
     group = {top["effect"], *top["near_equivalent"]}
     assert "course_instability" in group and top["effect"] in ("course_instability", "quadratic_yaw")
     assert top["significant"] and top["improvement_yaw_rate"] > 0.6 and top["t_statistic"] >= 3.0

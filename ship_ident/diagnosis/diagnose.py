@@ -562,8 +562,8 @@ def worst_segments(
 ) -> list[dict]:
     """Windows of every recording, training and held-out (``parts``: data, its recordings as
     ``recordings`` gives them, held out or not), ranked by the error of short free runs started
-    in each: the ``count`` worst overall and the worst of every recording not among them, so each
-    recording shows where the model fails in it.
+    in each from its measured state (``measured_states``): the ``count`` worst overall and the
+    worst of every recording not among them, so each recording shows where the model fails in it.
 
     The score adds the heading and yaw-rate RMSE, each relative to its RMS over all windows of all
     recordings, so both signals weigh alike.
@@ -571,12 +571,14 @@ def worst_segments(
     rows, errors_h, errors_r = [], [], []
     for data, names, held_out in parts:
         cut = windows(data, length_s)
-        heading, yaw_rate = structure.simulate(parameters, cut)
+        run = free_run(structure, parameters, cut)
+        heading, yaw_rate = run.heading, run.yaw_rate
         eh, er = heading - cut.heading, yaw_rate - cut.yaw_rate
         errors_h.append(eh)
         errors_r.append(er)
         if before is not None:
-            heading_b, yaw_rate_b = before.structure.simulate(before.parameters, cut)
+            run_before = free_run(before.structure, before.parameters, cut)
+            heading_b, yaw_rate_b = run_before.heading, run_before.yaw_rate
         for a, b in cut.segments:
             name = next((n for n, lo, hi in names if lo <= a < hi), names[0][0])
             row = {

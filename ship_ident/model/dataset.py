@@ -327,11 +327,13 @@ def resample_signals(
         stamps = np.asarray(stamps, dtype=float)
         values = np.asarray(values, dtype=float)
         ok = np.isfinite(stamps) & np.isfinite(values)
-        stamps, values = stamps[ok], values[ok]
-        order = np.argsort(stamps, kind="stable")
-        stamps, values = stamps[order], values[order]
-        keep = np.concatenate(([True], np.diff(stamps) > 0)) if len(stamps) else np.zeros(0, bool)
-        stamps, values = stamps[keep], values[keep]
+        if not ok.all():
+            stamps, values = stamps[ok], values[ok]
+        if not np.all(np.diff(stamps) > 0):  # an online window's stamps already increase
+            order = np.argsort(stamps, kind="stable")
+            stamps, values = stamps[order], values[order]
+            keep = np.concatenate(([True], np.diff(stamps) > 0)) if len(stamps) else np.zeros(0, bool)
+            stamps, values = stamps[keep], values[keep]
         if name == "heading" and unwrap_heading and len(values):
             values = np.unwrap(values)
         clean[name] = (stamps, values)

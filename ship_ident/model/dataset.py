@@ -130,6 +130,14 @@ class Dataset:
         return {}
 
     @cached_property
+    def derived(self) -> dict:
+        """Results computed from this dataset alone, kept by what they are and their arguments.
+
+        Filled by their makers (``signals.compute_signals``): a dataset is never changed once made.
+        """
+        return {}
+
+    @cached_property
     def sample_time(self) -> float:
         """Sample time in s (the grid step; computed once per dataset)."""
         if self.n_samples < 2:

@@ -24,12 +24,15 @@ both stand on this model.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numba import njit
 from scipy.linalg import solve_discrete_are
 
 from ..model.integrate import advance
+
+FILTERS_KEPT = 32  # innovation filters remembered by their noise model (``innovation_filter``)
 
 
 @dataclass(frozen=True)
@@ -151,6 +154,10 @@ class InnovationFilter:
 def innovation_filter(model: NoiseModel) -> InnovationFilter:
     """The steady Kalman filter of the correlated-noise model (Riccati equation, scipy's DARE).
 
+    The FILTERS_KEPT newest filters are kept by their model's exact numbers: the points of a cost's
+    profile all weigh their residuals with the noise model at one estimate's parameters, and the
+    Riccati equation is solved once for them.
+
     Parameters
     ----------
     model : NoiseModel
@@ -159,8 +166,29 @@ def innovation_filter(model: NoiseModel) -> InnovationFilter:
     Returns
     -------
     InnovationFilter
-        Its gain and the whitening of its innovations.
+        Its gain and the whitening of its innovations (shared by the callers with the same model:
+        read, never written).
     """
+    noise = np.array([model.rudder_noise, model.heading_noise, model.yaw_rate_noise], dtype=float)
+    return _filter_of_model(
+        (model.A.tobytes(), model.A.shape[0], model.b0.tobytes(), model.b1.tobytes(), noise.tobytes())
+    )
+
+
+@lru_cache(maxsize=FILTERS_KEPT)
+def _filter_of_model(numbers: tuple) -> InnovationFilter:
+    """``innovation_filter`` of the noise model whose exact numbers are ``numbers`` (the bytes of A,
+    its size, of b0, of b1 and of the noise levels)."""
+    a_bytes, n, b0_bytes, b1_bytes, noise_bytes = numbers
+    rudder_noise, heading_noise, yaw_rate_noise = np.frombuffer(noise_bytes)
+    model = NoiseModel(
+        A=np.frombuffer(a_bytes).reshape(n, n).copy(),
+        b0=np.frombuffer(b0_bytes).copy(),
+        b1=np.frombuffer(b1_bytes).copy(),
+        rudder_noise=float(rudder_noise),
+        heading_noise=float(heading_noise),
+        yaw_rate_noise=float(yaw_rate_noise),
+    )
     A, C, n = model.A, model.C, model.A.shape[0]
     s2 = model.rudder_noise**2
     g = A @ model.b1 + model.b0

@@ -130,6 +130,14 @@ class Dataset:
         return {}
 
     @cached_property
+    def derived(self) -> dict:
+        """Results computed from this dataset alone, kept by what they are and their arguments.
+
+        Filled by their makers (``signals.compute_signals``): a dataset is never changed once made.
+        """
+        return {}
+
+    @cached_property
     def sample_time(self) -> float:
         """Sample time in s (the grid step; computed once per dataset)."""
         if self.n_samples < 2:
@@ -327,11 +335,13 @@ def resample_signals(
         stamps = np.asarray(stamps, dtype=float)
         values = np.asarray(values, dtype=float)
         ok = np.isfinite(stamps) & np.isfinite(values)
-        stamps, values = stamps[ok], values[ok]
-        order = np.argsort(stamps, kind="stable")
-        stamps, values = stamps[order], values[order]
-        keep = np.concatenate(([True], np.diff(stamps) > 0)) if len(stamps) else np.zeros(0, bool)
-        stamps, values = stamps[keep], values[keep]
+        if not ok.all():
+            stamps, values = stamps[ok], values[ok]
+        if not np.all(np.diff(stamps) > 0):  # an online window's stamps already increase
+            order = np.argsort(stamps, kind="stable")
+            stamps, values = stamps[order], values[order]
+            keep = np.concatenate(([True], np.diff(stamps) > 0)) if len(stamps) else np.zeros(0, bool)
+            stamps, values = stamps[keep], values[keep]
         if name == "heading" and unwrap_heading and len(values):
             values = np.unwrap(values)
         clean[name] = (stamps, values)

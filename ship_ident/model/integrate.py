@@ -25,13 +25,16 @@ from numba import njit
 TRIG_NONE, TRIG_COS, TRIG_SIN = 0, 1, 2
 TERM_FIELDS = ("r_power", "abs_power", "harmonic", "trig")  # integer fields of a forcing term, in kernel order
 RK4_NODES = np.array([0.0, 0.5, 0.5, 1.0])  # stage times within a step, in steps
+# Up to this many lanes ``simulate_kernel`` steps them one after the other, beyond it in vector loops
+# (the faster way on either side, measured on a replay's runs)
+MOST_LANES_ONE_BY_ONE = 24
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _forcing(psi, r, coef, r_power, abs_power, harmonic, trig):
     """Yaw forcing (rad/s) of one state: sum of coef r^r_power |r|^abs_power trig(harmonic psi).
-    ``_forcing_lanes`` evaluates the same sum over many lanes at once; the two stay apart on
-    purpose: the lane integrator calling this scalar kernel per lane ran 35 % slower."""
+    Inlined where it is called (a single chain, or a few lanes stepped one by one); ``_forcing_lanes``
+    evaluates the same sum over many lanes at once, in vector loops."""
     total = 0.0
     for j in range(coef.shape[0]):
         v = coef[j]
@@ -245,6 +248,83 @@ def _advance_lane(
         psi_out[k + 1], r_out[k + 1] = psi, r
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _lane_slopes(order, tp, tr, tz, d, lane_constants, coef, r_power, abs_power, harmonic, trig):
+    """One lane's RK4 stage slopes of (psi, r, z) at the state (tp, tr, tz) and rudder d (rad), its
+    per-sample ``lane_constants`` those of ``simulate_kernel``'s lanes (K, T1 + T2, 1 / (T1 T2),
+    K T3, 1 / T) and the forcing terms as ``_forcing``'s: the same operations as the vector loops,
+    so the same numbers."""
+    K, S, inv_P, KT3, inv_T = lane_constants
+    force = _forcing(tp, tr, coef, r_power, abs_power, harmonic, trig)
+    if order == 1:
+        return tr, (K * d + force - tr) * inv_T, 0.0
+    return tr, (tz - S * tr + KT3 * d) * inv_P, K * d + force - tr
+
+
+@njit(cache=True, error_model="numpy")
+def _advance_lanes_one_by_one(
+    order, dt, substeps, psi, r, z, K, S, inv_P, KT3, inv_T, d0, slope, run, coef, r_power, abs_power, harmonic, trig
+):
+    """``simulate_kernel``'s step of every lane over one sample, one lane after the other in
+    registers: for a few lanes the vector loops are mostly overhead, and two or three independent
+    chains already fill the processor's pipelines. Same operations in the same order as the vector
+    loops, so the same numbers."""
+    half, whole = 0.5 * dt, 1.0 * dt
+    for lane in range(psi.shape[0]):
+        lane_coef, constants = coef[run[lane]], (K[lane], S[lane], inv_P[lane], KT3[lane], inv_T[lane])
+        p, q, w, a, b = psi[lane], r[lane], z[lane], d0[lane], slope[lane]
+        for sub in range(substeps):
+            d_start = a + ((sub + 0.0) / substeps) * b
+            d_mid = a + ((sub + 0.5) / substeps) * b
+            d_end = a + ((sub + 1.0) / substeps) * b
+            s1p, s1r, s1z = _lane_slopes(
+                order, p, q, w, d_start, constants, lane_coef, r_power, abs_power, harmonic, trig
+            )
+            s2p, s2r, s2z = _lane_slopes(
+                order,
+                p + half * s1p,
+                q + half * s1r,
+                w + half * s1z,
+                d_mid,
+                constants,
+                lane_coef,
+                r_power,
+                abs_power,
+                harmonic,
+                trig,
+            )
+            s3p, s3r, s3z = _lane_slopes(
+                order,
+                p + half * s2p,
+                q + half * s2r,
+                w + half * s2z,
+                d_mid,
+                constants,
+                lane_coef,
+                r_power,
+                abs_power,
+                harmonic,
+                trig,
+            )
+            s4p, s4r, s4z = _lane_slopes(
+                order,
+                p + whole * s3p,
+                q + whole * s3r,
+                w + whole * s3z,
+                d_end,
+                constants,
+                lane_coef,
+                r_power,
+                abs_power,
+                harmonic,
+                trig,
+            )
+            p += dt * (s1p + 2 * s2p + 2 * s3p + s4p) / 6
+            q += dt * (s1r + 2 * s2r + 2 * s3r + s4r) / 6
+            w += dt * (s1z + 2 * s2z + 2 * s3z + s4z) / 6
+        psi[lane], r[lane], z[lane] = p, q, w
+
+
 @njit(cache=True, error_model="numpy")
 def simulate_kernel(
     order,
@@ -376,37 +456,60 @@ def simulate_kernel(
             inv_T[lane] = 1.0 / (constants[j, 1] * s)
             d0[lane] = rudder[j, k]
             slope[lane] = rudder[j, min(k + 1, n - 1)] - d0[lane]
-        for sub in range(substeps):
-            for q in range(4):  # stage q from the state advanced by the previous stage's slope
-                fraction = (sub + RK4_NODES[q]) / substeps
-                weight = RK4_NODES[q] * dt
+        if lanes <= MOST_LANES_ONE_BY_ONE:
+            _advance_lanes_one_by_one(
+                order,
+                dt,
+                substeps,
+                psi,
+                r,
+                z,
+                K,
+                S,
+                inv_P,
+                KT3,
+                inv_T,
+                d0,
+                slope,
+                run,
+                coef,
+                r_power,
+                abs_power,
+                harmonic,
+                trig,
+            )
+        else:
+            for sub in range(substeps):
+                for q in range(4):  # stage q from the state advanced by the previous stage's slope
+                    fraction = (sub + RK4_NODES[q]) / substeps
+                    weight = RK4_NODES[q] * dt
+                    for lane in range(lanes):
+                        d[lane] = d0[lane] + fraction * slope[lane]
+                        if q == 0:
+                            tp[lane], tr[lane], tz[lane] = psi[lane], r[lane], z[lane]
+                        else:
+                            tp[lane] = psi[lane] + weight * stage[q - 1, 0, lane]
+                            tr[lane] = r[lane] + weight * stage[q - 1, 1, lane]
+                            tz[lane] = z[lane] + weight * stage[q - 1, 2, lane]
+                    _forcing_lanes(force, work, tp, tr, lane_coef, r_power, abs_power, harmonic, trig)
+                    for lane in range(lanes):
+                        stage[q, 0, lane] = tr[lane]
+                        if order == 1:
+                            stage[q, 1, lane] = (K[lane] * d[lane] + force[lane] - tr[lane]) * inv_T[lane]
+                            stage[q, 2, lane] = 0.0
+                        else:
+                            stage[q, 1, lane] = (tz[lane] - S[lane] * tr[lane] + KT3[lane] * d[lane]) * inv_P[lane]
+                            stage[q, 2, lane] = K[lane] * d[lane] + force[lane] - tr[lane]
                 for lane in range(lanes):
-                    d[lane] = d0[lane] + fraction * slope[lane]
-                    if q == 0:
-                        tp[lane], tr[lane], tz[lane] = psi[lane], r[lane], z[lane]
-                    else:
-                        tp[lane] = psi[lane] + weight * stage[q - 1, 0, lane]
-                        tr[lane] = r[lane] + weight * stage[q - 1, 1, lane]
-                        tz[lane] = z[lane] + weight * stage[q - 1, 2, lane]
-                _forcing_lanes(force, work, tp, tr, lane_coef, r_power, abs_power, harmonic, trig)
-                for lane in range(lanes):
-                    stage[q, 0, lane] = tr[lane]
-                    if order == 1:
-                        stage[q, 1, lane] = (K[lane] * d[lane] + force[lane] - tr[lane]) * inv_T[lane]
-                        stage[q, 2, lane] = 0.0
-                    else:
-                        stage[q, 1, lane] = (tz[lane] - S[lane] * tr[lane] + KT3[lane] * d[lane]) * inv_P[lane]
-                        stage[q, 2, lane] = K[lane] * d[lane] + force[lane] - tr[lane]
-            for lane in range(lanes):
-                psi[lane] += (
-                    dt * (stage[0, 0, lane] + 2 * stage[1, 0, lane] + 2 * stage[2, 0, lane] + stage[3, 0, lane]) / 6
-                )
-                r[lane] += (
-                    dt * (stage[0, 1, lane] + 2 * stage[1, 1, lane] + 2 * stage[2, 1, lane] + stage[3, 1, lane]) / 6
-                )
-                z[lane] += (
-                    dt * (stage[0, 2, lane] + 2 * stage[1, 2, lane] + 2 * stage[2, 2, lane] + stage[3, 2, lane]) / 6
-                )
+                    psi[lane] += (
+                        dt * (stage[0, 0, lane] + 2 * stage[1, 0, lane] + 2 * stage[2, 0, lane] + stage[3, 0, lane]) / 6
+                    )
+                    r[lane] += (
+                        dt * (stage[0, 1, lane] + 2 * stage[1, 1, lane] + 2 * stage[2, 1, lane] + stage[3, 1, lane]) / 6
+                    )
+                    z[lane] += (
+                        dt * (stage[0, 2, lane] + 2 * stage[1, 2, lane] + 2 * stage[2, 2, lane] + stage[3, 2, lane]) / 6
+                    )
         for lane in range(lanes):
             k = first[lane] + step
             if alive[lane] and k <= last[lane]:

@@ -21,7 +21,7 @@ derivatives there are one-sided.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -118,6 +118,9 @@ def compute_signals(
 ) -> Signals:
     """Smooth and differentiate a dataset segment by segment.
 
+    Computed once per dataset and arguments (``Dataset.derived``), each caller given its own copy (an
+    effect's ``prepare`` sets its fields).
+
     Savitzky-Golay (Savitzky and Golay 1964) local polynomials, or a Rauch-Tung-Striebel smoother
     (Rauch, Tung and Striebel 1965) of a constant-jerk yaw model fusing heading and yaw rate.
     ``window_s`` defaults to ``smoothing_window`` of the yaw-rate noise
@@ -146,6 +149,14 @@ def compute_signals(
     DataError
         For an unknown method or non-finite data.
     """
+    key = ("signals", method, window_s, jerk_psd)
+    if key not in dataset.derived:
+        dataset.derived[key] = _smoothed_signals(dataset, method, window_s, jerk_psd)
+    return replace(dataset.derived[key])
+
+
+def _smoothed_signals(dataset: Dataset, method: str, window_s: float | None, jerk_psd: float) -> Signals:
+    """The signals ``compute_signals`` returns, computed afresh."""
     if method not in DIFFERENTIATION_METHODS:
         raise DataError(f"unknown differentiation method {method!r}; choose from {', '.join(DIFFERENTIATION_METHODS)}")
     dataset.check_finite()

@@ -381,10 +381,13 @@ class Structure:
         self.check_data(dataset)
         h = dataset.sample_time
         substeps = substeps or substeps_for(h, min(self.fastest_time_constant(p) for p in param_sets))
-        inputs = [self.effective_inputs(p, dataset.time, dataset.rudder, dataset.speed) for p in param_sets]
-        rudder, gain, tscale = (np.array([x[i] for x in inputs], dtype=float) for i in range(3))
+        runs = len(param_sets)
+        rudder = np.empty((runs, dataset.n_samples))
+        gain, tscale = np.empty_like(rudder), np.empty_like(rudder)
+        for k, p in enumerate(param_sets):
+            rudder[k], gain[k], tscale[k] = self.effective_inputs(p, dataset.time, dataset.rudder, dataset.speed)
         kernels = [self.kernel(p) for p in param_sets]
-        coef = np.array([[t.coefficient for t in ts] for _, ts in kernels], dtype=float).reshape(len(kernels), -1)
+        coef = np.array([[t.coefficient for t in ts] for _, ts in kernels], dtype=float).reshape(runs, -1)
         ints = [np.array([getattr(t, f) for t in kernels[0][1]], dtype=np.int64) for f in TERM_FIELDS]
         constants = np.array([c for c, _ in kernels], dtype=float)
         bounds = np.array(dataset.segments, dtype=np.int64).reshape(-1, 2)
@@ -393,11 +396,13 @@ class Structure:
                 [(dataset.heading[a], dataset.yaw_rate[a] - self.yaw_rate_bias(p), 0.0) for a, _ in dataset.segments]
                 for p in param_sets
             ]
-        initial = np.array(initials, dtype=float).reshape(len(param_sets), len(bounds), 3)
+        initial = np.array(initials, dtype=float).reshape(runs, len(bounds), 3)
         psi_out, r_out = simulate_kernel(
             self.order, h, rudder, gain, tscale, constants, bounds, initial, coef, *ints, substeps
         )
-        return psi_out, np.array([self.measured_yaw_rate(r, p) for r, p in zip(r_out, param_sets)])
+        for k, p in enumerate(param_sets):
+            r_out[k] = self.measured_yaw_rate(r_out[k], p)
+        return psi_out, r_out
 
     def kernel(self, params: dict) -> tuple[tuple[float, float, float, float], list[ForcingTerm]]:
         """The integrator's constants (K, T1, T2, T3) and forcing terms for ``params``.

@@ -297,3 +297,22 @@ def test_a_candidate_that_brings_the_pooled_error_back_to_the_noise_floor_needs_
     assert not pooled(1.6, 1.3, 2.5).significant("cubic_yaw")
     assert not pooled(1.5, 1.0, 1.9).significant("cubic_yaw")
     assert pooled(1.6, 1.3, 3.1).significant("cubic_yaw")
+
+
+def test_a_near_equivalent_group_is_led_by_a_candidate_whose_parameters_the_data_determine():
+    """A rudder offset on a zigzag about one heading: a wind moment runs as well (its heading
+    harmonics fit the offset over that sector, and a little noise besides), but the window's fit
+    leaves its harmonics undetermined. The pool names the offset; with the wind's parameters
+    determined it names the wind, the better of the two."""
+    rng = np.random.default_rng(3)
+    floor = 0.01
+    noise = floor * rng.standard_normal(600)
+    errors = [noise + 0.02, noise + 0.001 * rng.standard_normal(600), noise]  # the model, rudder_offset, wind_yaw
+    names = ["model", "rudder_offset", "wind_yaw"]
+    pool = PooledEvidence(names)
+    pool.add(slice_sums(np.arange(600) * 0.1, 0.1, names, errors, [0.0, 0.3, 0.3], floor))
+    assert pool.significant("rudder_offset") and pool.significant("wind_yaw")
+    assert pool.equivalents("wind_yaw") == ["rudder_offset"]
+    assert OnlineDiagnosis._determined_lead(pool, "wind_yaw", {"wind_yaw"}) == "rudder_offset"
+    assert OnlineDiagnosis._determined_lead(pool, "wind_yaw", set()) == "wind_yaw"
+    assert OnlineDiagnosis._determined_lead(pool, "wind_yaw", {"wind_yaw", "rudder_offset"}) == "wind_yaw"

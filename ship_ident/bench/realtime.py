@@ -7,9 +7,11 @@ machine may be shared, and the CPU time is what the work costs whatever else run
   imports and bag reading included, on a simulated 1-hour bag at 10 Hz on each input (the
   bundled bag's vessel, seed 001's, on the mixed manoeuvre with realistic noise; the noise drawn
   from the seed): the bag's duration over the process's time.
-* **bundled bag, refit loop**: ``bags/demo_seed001.mcap`` (600 s) replayed in this process through
-  ``io.bag_replay.replay_bag`` after one untimed replay (imports and compiled kernels loaded): the
-  bag's duration over the loop's time (samples, refits and change watches).
+* **bundled bag, refit loop**: ``bags/demo_seed001.mcap`` (600 s) run in this process through the
+  online core's schedule (``online.identifier.run_schedule``) with the diagnosis on board at its
+  default period, as the node runs it (``replay`` does with ``--diagnosis-period``), after one
+  untimed run (imports and compiled kernels loaded): the bag's duration over the loop's time
+  (samples, refits, change watches and diagnoses).
 * **node refit p95**: the real node (``bench onboard``'s measurement: DDS on a private domain,
   ``ship-ident play`` at real time, 10 Hz inputs) with the diagnosis on board on at its default
   period, on a USV drawn from the seed; the 95th percentile of the ``compute_seconds`` (wall time)
@@ -70,8 +72,8 @@ def hour_replay(seed: int, folder: str, duration: float) -> dict:
 
 
 def bundled_loop() -> dict:
-    """The bundled bag's refit loop in this process, as ``replay`` runs it (the bag read and one
-    untimed run first): wall and CPU seconds."""
+    """The bundled bag's refit loop in this process with the diagnosis on board, as the node runs it
+    (the bag read and one untimed run first): wall and CPU seconds."""
     from ..diagnosis.onboard import OnlineDiagnosis
     from ..io.files import DEFAULT_TOPICS, read_samples
     from ..online.identifier import OnlineIdentifier, run_schedule

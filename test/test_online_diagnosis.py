@@ -34,13 +34,14 @@ def diagnosed(sim, config, until=None):
 def test_a_hidden_wind_is_named_added_by_itself_and_the_held_out_error_halves():
     """A steady wind's heading-dependent yaw moment, hidden: a single window's t is weak (1.5-2.5), the
     pooled verdict names wind_yaw within three periods after the window fills; auto-add adds it
-    after three diagnoses in a row and keeps it, the held-out error down by more than half."""
+    after three diagnoses in a row and keeps it, the held-out error down by more than half and within
+    the noise margin within two diagnoses of the add."""
     window, period = 120.0, 30.0
     config = OnlineConfig(
         window_length=window, refit_period=10.0, diagnosis_period=period, auto_add_effects=True, auto_add_after=3
     )
     sim = simulate("random", effects=SEED_EFFECTS + ("wind_yaw",), duration=400.0, seed=1)
-    events = diagnosed(sim, config, until=lambda d: d.get("auto_add", {}).get("action") == "kept")
+    events = diagnosed(sim, config)
     done = [d for _, d in events if d["status"] == "done"]
     assert [d["reason"] for _, d in events if d["status"] == "skipped"][0].startswith("the window holds")
     named_record, named = next((r, d) for r, d in events if d.get("verdict") == "missing_effect")
@@ -51,11 +52,13 @@ def test_a_hidden_wind_is_named_added_by_itself_and_the_held_out_error_halves():
     added = next(d for d in done if d.get("auto_add", {}).get("action") == "added")
     streak = done[done.index(added) - 2 : done.index(added) + 1]
     assert all(d["verdict"] == "missing_effect" and d["candidates"][0]["effect"] == "wind_yaw" for d in streak)
-    kept = done[-1]
-    assert kept["auto_add"]["action"] == "kept" and kept["structure"]["effects"] == list(SEED_EFFECTS) + ["wind_yaw"]
+    kept = next(d for d in done if d.get("auto_add", {}).get("action") == "kept")
+    assert kept["structure"]["effects"] == list(SEED_EFFECTS) + ["wind_yaw"]
     assert kept["stamp"] <= added["stamp"] + 2 * window
-    assert kept["held_out_error"] <= 0.5 * named["held_out_error"]  # measured: 0.84 -> 0.21 deg/s
-    assert kept["held_out_error"] < 1.25 * kept["noise_floor"] and kept["verdict"] != "missing_effect"
+    assert kept["held_out_error"] <= 0.5 * named["held_out_error"]  # measured: 5.7 -> 1.5 noise floors
+    after = done[done.index(added) + 1 : done.index(added) + 3]  # measured: 1.46, then 0.88 noise floors
+    assert any(d["held_out_error"] < 1.25 * d["noise_floor"] for d in after)
+    assert all(d["verdict"] != "missing_effect" for d in done[done.index(added) + 1 :])
     assert "missing_effect" not in events[-1][0].conditions
 
 
@@ -287,16 +290,14 @@ def pooled(model_over_floor: float, candidate_over_floor: float, t: float) -> Po
     return pool
 
 
-def test_a_candidate_that_brings_the_pooled_error_back_to_the_noise_floor_needs_a_t_of_two():
-    """A model error 1.5 times the noise floor that the candidate takes to the floor: significant
-    at t 2.5. The same t on a model error 1.2 times the floor (within the noise margin: the pool
-    shows nothing missing), or from 1.6 to 1.3 floors (19 % removed, short of the floor), is not;
-    t 3 is, as before."""
-    assert pooled(1.5, 1.0, 2.5).significant("cubic_yaw")
-    assert not pooled(1.2, 1.0, 2.5).significant("cubic_yaw")
-    assert not pooled(1.6, 1.3, 2.5).significant("cubic_yaw")
-    assert not pooled(1.5, 1.0, 1.9).significant("cubic_yaw")
+def test_a_candidate_on_board_needs_a_t_of_three_however_close_to_the_floor_it_brings_the_error():
+    """A model error 1.5 times the noise floor that the candidate takes to the floor: not significant
+    at t 2.5 (on a hull that lacks nothing, several candidates each remove a quarter at t near 2);
+    at t 3.1 it is, and so is one removing 19 % short of the floor."""
+    assert not pooled(1.5, 1.0, 2.5).significant("cubic_yaw")
+    assert pooled(1.5, 1.0, 3.1).significant("cubic_yaw")
     assert pooled(1.6, 1.3, 3.1).significant("cubic_yaw")
+    assert not pooled(1.2, 1.15, 3.1).significant("cubic_yaw")  # 4 % removed: not enough
 
 
 def test_a_near_equivalent_group_is_led_by_a_candidate_whose_parameters_the_data_determine():

@@ -262,6 +262,29 @@ def resample_series(
 SAMPLES_TO_AVERAGE = 2.0
 
 
+def median_above(values: np.ndarray, threshold: float) -> bool:
+    """Whether the median of ``values`` (finite, at least one) exceeds ``threshold``: counted, as
+    the median exceeds it exactly when the middle value (both middle values of an even count) does;
+    the median itself is taken only when the two middle values of an even count straddle it.
+
+    Parameters
+    ----------
+    values : ndarray
+        Finite values (a signal's stamp steps, s).
+    threshold : float
+        The value compared with (s).
+
+    Returns
+    -------
+    bool
+        ``np.median(values) > threshold``.
+    """
+    n, above = len(values), int(np.count_nonzero(values > threshold))
+    if n % 2 or above != n // 2:
+        return above > n // 2
+    return bool(np.median(values) > threshold)
+
+
 def on_grid(
     stamps: np.ndarray, values: np.ndarray, steps: np.ndarray, grid: np.ndarray, sample_time: float
 ) -> np.ndarray:
@@ -273,7 +296,7 @@ def on_grid(
     tenth of the data, and its estimates scattered sqrt(10) times wider than the data allow; the
     step mean keeps the sensor noise white and divides its variance by the samples averaged, and
     it shifts a smooth signal by only h^2 / 24 times its second derivative."""
-    if len(stamps) < 2 or np.median(steps) > sample_time / SAMPLES_TO_AVERAGE:
+    if len(stamps) < 2 or median_above(steps, sample_time / SAMPLES_TO_AVERAGE):
         return np.interp(grid, stamps, values)
     slopes = np.diff(values) / steps
     integral = np.concatenate(([0.0], np.cumsum(0.5 * (values[:-1] + values[1:]) * steps)))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from ship_ident.model.dataset import DataError, Dataset, cut_segments, resample_series
+from ship_ident.model.dataset import DataError, Dataset, cut_segments, median_above, resample_series
 from ship_ident.model.simulator import simulate
 from ship_ident.model.structure import Structure, StructureError
 
@@ -119,6 +119,16 @@ def test_a_signal_sampled_faster_than_the_grid_is_averaged_over_each_step():
     assert np.std(ds.rudder - truth) == pytest.approx(0.01 / np.sqrt(10), rel=0.1)
     assert np.allclose(ds.heading, 0.02 * ds.time, atol=1e-12)
     assert np.allclose(ds.yaw_rate, truth, atol=1e-12)
+
+
+def test_median_above_a_threshold_is_counted_as_the_median_decides_it():
+    """Stamp steps of 0.05 s and 0.1 s against half a 0.1 s grid step, odd and even counts, the two
+    middle values of an even count either side of it or on it: the count decides as the median does."""
+    rng = np.random.default_rng(11)
+    for _ in range(2000):
+        steps = rng.choice([0.05, 0.0999, 0.1, 0.2], size=rng.integers(1, 9))
+        for threshold in (0.05, 0.1, float(rng.choice(steps))):
+            assert median_above(steps, threshold) == (np.median(steps) > threshold), (steps, threshold)
 
 
 def test_resample_rejects_nonoverlapping_and_missing_signals():

@@ -1069,3 +1069,36 @@ def test_quick_change_test_takes_the_largest_median_of_the_newest_samples():
     lost = squared.copy()
     lost[-23] = np.nan  # the suffixes of 20 to 22 samples only
     assert largest_newest_median(lost, 20) == 110.5
+
+
+def test_a_valley_slide_is_profiled_again_where_it_can_decide_whether_t1_is_trusted(monkeypatch):
+    """A quick USV's T1 1.5 s at +- 0.3 % with T2 0.05 +- 0.1 s (undetermined): its slide along the
+    T2 = T3 valley (profiled: 0.2 s, 13 %, far above the 4 % trusted limit) is reused by the next
+    window, 5 s on, at the same point of the valley; a window 35 s on, or one whose T1 moved by a
+    standard error, is profiled afresh, and a slide at the limit (0.06 s, 4 %) is profiled every time."""
+    from ship_ident.estimators.base import Estimate
+    from ship_ident.online import uncertainty
+
+    structure = OnlineConfig().structure()
+    profiled = []
+    slides = iter((0.2, 0.2, 0.06, 0.06, 0.06))
+
+    def profile(estimate, estimator, structure, dataset):
+        profiled.append(estimate.window)
+        return next(slides)
+
+    monkeypatch.setattr(uncertainty, "valley_slide", profile)
+    errors = {"K": 0.001, "T1": 0.005, "T2": 0.1, "T3": 0.1, "delta_r": 0.001, "alpha": 1.0}
+    valley = uncertainty.ValleyProfile()
+    for start, t1, slide, count in (
+        (0.0, 1.5, 0.2, 1),
+        (5.0, 1.5, 0.2, 1),  # reused
+        (35.0, 1.5, 0.2, 2),  # too few samples shared
+        (40.0, 1.505, 0.06, 3),  # T1 moved by its error
+        (45.0, 1.505, 0.06, 4),  # at the limit
+        (50.0, 1.505, 0.06, 5),
+    ):
+        parameters = {"K": 0.5, "T1": t1, "T2": 0.05, "T3": 0.1, "delta_r": 0.0, "alpha": 5.0}
+        estimate = Estimate(structure, "m", parameters, errors, {}, 1800, window=(start, start + 180.0))
+        assert valley.slide(estimate, errors, None, structure, None) == slide
+        assert len(profiled) == count, start

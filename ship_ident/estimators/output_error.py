@@ -749,8 +749,16 @@ class OutputError(Estimator):
             first_polished = 0
         else:
             first_polished = len(guesses) - len(starts) if self.explore else len(points)
-        plain = points[:first_polished]
-        costs = list(np.sum(search.residuals(plain, substeps, [w for w, _ in weighings]) ** 2, axis=1)) if plain else []
+        # a plain start equal to a polished one (a warm fit's estimate, also given as a start) is not
+        # judged apart: its polished twin costs at most as much (Huber weights <= 1, steps kept
+        # only when they lower the cost)
+        twins = points[first_polished:]
+        plain = [i for i in range(first_polished) if not any(np.array_equal(points[i], q) for q in twins)]
+        costs = [math.inf] * first_polished
+        if plain:
+            judged = search.residuals([points[i] for i in plain], substeps, [weighings[i][0] for i in plain])
+            for i, cost in zip(plain, np.sum(judged**2, axis=1)):
+                costs[i] = cost
         for i in range(first_polished, len(points)):
             points[i], cost = search.polished(points[i], weighings[i][0], gain_first, linear)
             costs.append(cost)

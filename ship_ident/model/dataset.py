@@ -262,18 +262,42 @@ def resample_series(
 SAMPLES_TO_AVERAGE = 2.0
 
 
-def on_grid(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, sample_time: float) -> np.ndarray:
-    """A signal (sorted ``stamps`` in s, ``values``) at the ``grid`` points: its linear
-    interpolant's mean over the step [t - h/2, t + h/2] around each point (h = ``sample_time``;
-    the step shrinks symmetrically at the span's ends) when its median stamp step is at most
+def median_above(values: np.ndarray, threshold: float) -> bool:
+    """Whether the median of ``values`` (finite, at least one) exceeds ``threshold``: counted, as
+    the median exceeds it exactly when the middle value (both middle values of an even count) does;
+    the median itself is taken only when the two middle values of an even count straddle it.
+
+    Parameters
+    ----------
+    values : ndarray
+        Finite values (a signal's stamp steps, s).
+    threshold : float
+        The value compared with (s).
+
+    Returns
+    -------
+    bool
+        ``np.median(values) > threshold``.
+    """
+    n, above = len(values), int(np.count_nonzero(values > threshold))
+    if n % 2 or above != n // 2:
+        return above > n // 2
+    return bool(np.median(values) > threshold)
+
+
+def on_grid(
+    stamps: np.ndarray, values: np.ndarray, steps: np.ndarray, grid: np.ndarray, sample_time: float
+) -> np.ndarray:
+    """A signal (sorted ``stamps`` in s, ``values``, the ``steps`` between the stamps in s) at the
+    ``grid`` points: its linear interpolant's mean over the step [t - h/2, t + h/2] around each
+    point (h = ``sample_time``; the step shrinks symmetrically at the span's ends) when its median stamp step is at most
     1/SAMPLES_TO_AVERAGE of h, else the interpolant itself. Interpolating a fast signal keeps one
     sample in h / step and throws the rest away: a slow ship's 1 s grid on 10 Hz sensors kept a
     tenth of the data, and its estimates scattered sqrt(10) times wider than the data allow; the
     step mean keeps the sensor noise white and divides its variance by the samples averaged, and
     it shifts a smooth signal by only h^2 / 24 times its second derivative."""
-    if len(stamps) < 2 or np.median(np.diff(stamps)) > sample_time / SAMPLES_TO_AVERAGE:
+    if len(stamps) < 2 or median_above(steps, sample_time / SAMPLES_TO_AVERAGE):
         return np.interp(grid, stamps, values)
-    steps = np.diff(stamps)
     slopes = np.diff(values) / steps
     integral = np.concatenate(([0.0], np.cumsum(0.5 * (values[:-1] + values[1:]) * steps)))
 
@@ -330,38 +354,39 @@ def resample_signals(
     if sample_time <= 0:
         raise DataError(f"sample_time must be > 0 s, got {sample_time}")
     gap_threshold = 5 * sample_time if gap_threshold is None else gap_threshold
-    clean: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    clean: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # stamps, values, steps between the stamps
     for name, (stamps, values) in series.items():
         stamps = np.asarray(stamps, dtype=float)
         values = np.asarray(values, dtype=float)
         ok = np.isfinite(stamps) & np.isfinite(values)
         if not ok.all():
             stamps, values = stamps[ok], values[ok]
-        if not np.all(np.diff(stamps) > 0):  # an online window's stamps already increase
+        steps = np.diff(stamps)
+        if not np.all(steps > 0):  # an online window's stamps already increase
             order = np.argsort(stamps, kind="stable")
             stamps, values = stamps[order], values[order]
             keep = np.concatenate(([True], np.diff(stamps) > 0)) if len(stamps) else np.zeros(0, bool)
             stamps, values = stamps[keep], values[keep]
+            steps = np.diff(stamps)
         if name == "heading" and unwrap_heading and len(values):
             values = np.unwrap(values)
-        clean[name] = (stamps, values)
+        clean[name] = (stamps, values, steps)
     for name in required:
         if name not in clean or len(clean[name][0]) < 2:
             raise DataError(f"no usable {name} samples (need at least 2 finite samples)")
-    start = max(s[0] for s, _ in clean.values())
-    stop = min(s[-1] for s, _ in clean.values())
+    start = max(s[0] for s, _, _ in clean.values())
+    stop = min(s[-1] for s, _, _ in clean.values())
     if stop - start < 2 * sample_time:
         raise DataError("the signals do not overlap in time; check topic names and clocks")
     grid = start + sample_time * np.arange(int(np.floor((stop - start) / sample_time + 1e-9)) + 1)
     valid = np.ones(len(grid), dtype=bool)
     gaps: list[tuple[float, float]] = []
-    for stamps, _ in clean.values():
-        steps = np.diff(stamps)
+    for stamps, _, steps in clean.values():
         for i in np.flatnonzero(steps > gap_threshold):
             a, b = stamps[i], stamps[i + 1]
             gaps.append((float(a), float(b)))
             valid &= ~((grid > a) & (grid < b))
-    out = {name: on_grid(s, v, grid, sample_time) for name, (s, v) in clean.items()}
+    out = {name: on_grid(*signal, grid, sample_time) for name, signal in clean.items()}
     edges = np.diff(np.concatenate(([0], valid.astype(np.int8), [0])))  # +1 where a run of valid points starts
     keep_idx = np.flatnonzero(valid)
     remap = np.full(len(grid), -1)

@@ -47,7 +47,7 @@ from .input_checks import (
 )
 from .samples import ROLES, Sample
 from .trust import TrustPolicy
-from .uncertainty import EstimateScatter, along_the_damping, first_order_valley
+from .uncertainty import EstimateScatter, ValleyProfile, along_the_damping, first_order_valley
 from .verdicts import FOLLOWED, LAST_GOOD, Verdict
 from .window import SampleWindow
 from .window_fit import fit_window
@@ -194,6 +194,7 @@ class OnlineIdentifier:
         self._change_note = None  # sentence reported until the first estimate after a change
         self._trust = TrustPolicy()  # remembers the last estimate held for jumping: the next may confirm it
         self._scatter = EstimateScatter()
+        self._valley = ValleyProfile()  # the last profile along the T2 = T3 valley: reused where it cannot decide
         self._full_window_fitted = False  # an estimate of a full window published since the start
 
     # --- configuration ---------------------------------------------------
@@ -218,6 +219,7 @@ class OnlineIdentifier:
                 self._last_good = self._trust.candidate = None
                 self._change.forget()
                 self._scatter.forget()
+                self._valley.forget()
                 self._full_window_fitted = False
             self._change.ratio, self._change.length = config.change_ratio, config.change_test_length
             self._change.short = _short_test(config)
@@ -273,6 +275,7 @@ class OnlineIdentifier:
             self._window_floor = -math.inf
             self._change.forget()  # its references belong to the old time line
             self._scatter.forget()
+            self._valley.forget()
             self._full_window_fitted = False
         elif (
             not now > self._latest_time + max(config.clock_jump_threshold, config.refit_period)
@@ -499,7 +502,8 @@ class OnlineIdentifier:
         # next estimates (a fit at the valley's foot with a small error makes the right estimates after
         # it look scattered); whether T2 is told from zero is judged on the window's own T2 error
         estimate = replace(
-            estimate, std_errors=first_order_valley(estimate, estimate.std_errors, estimator, structure, dataset)
+            estimate,
+            std_errors=first_order_valley(estimate, estimate.std_errors, estimator, structure, dataset, self._valley),
         )
         published = replace(estimate, std_errors=self._scatter.honest(estimate))
         implausible = self._trust.plausibility(config, structure, published, dataset, last_good)
@@ -608,6 +612,7 @@ class OnlineIdentifier:
         with self._lock:
             self._window_floor, self._change_note = changed_at, note
             self._scatter.forget()  # the new response's estimates scatter about other values
+            self._valley.forget()  # and lie in another valley
             if self._next_due is not None:
                 self._next_due = min(self._next_due, now + config.refit_period / WATCHES_PER_REFIT)
         return note

@@ -46,6 +46,14 @@ ALPHA_RUNGS = (2.0, 4.0)  # the profile's points, in alpha's standard errors eit
 # Regressions cannot hold a parameter: below this share of T1, an undetermined T2 gives T1 the joint
 # error of T1, T2 and T3 instead
 FIRST_ORDER_SHARE = 0.1
+# A slide along the T2 = T3 valley is reused (``ValleyProfile``) by a window sharing at least this
+# share of its samples with the one profiled (two refit periods of a 180 s window): the cost is a sum
+# over the samples, so the two costs' valleys differ by the few new samples' terms
+REUSE_SHARED_SAMPLES = 0.85
+REUSE_STANDARD_ERRORS = 0.5  # ... whose T1, T2 and T3 lie within this many of their errors of the profiled ones
+# ... unless T1's error with that slide lies within this factor of its trusted limit (either way):
+# there the slide decides whether T1 is trusted, and it is profiled afresh
+REUSE_CLEAR_FACTOR = 1.5
 
 
 class EstimateScatter:
@@ -171,7 +179,65 @@ def _shared_shares(a, b) -> tuple[dict, float]:
     }, time_share
 
 
-def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset) -> dict:
+class ValleyProfile:
+    """T1's slide along the T2 = T3 valley (``valley_slide``), profiled only where it can decide.
+
+    Rule: a refit reuses the last profiled slide when its window shares REUSE_SHARED_SAMPLES of its
+    samples with the profiled one, its T1, T2 and T3 lie within REUSE_STANDARD_ERRORS of their own
+    errors of the profiled estimate's, and T1's error with that slide is not within
+    REUSE_CLEAR_FACTOR of its trusted limit. Physical reason: the cost is a sum over the window's
+    samples, so windows sharing nearly all of them have the same valley, and an estimate that sits
+    at the same point of it slides as far; only a slide near the limit decides whether T1 is trusted
+    (a slide far from it enters the published error and the scatter of the next estimates as the
+    profile of the shared samples measured it).
+    """
+
+    def __init__(self):
+        self._last = None  # (estimate profiled, T1's slide in s), or None
+
+    def forget(self) -> None:
+        """Drop the last profile (the window restarts: other samples, another valley)."""
+        self._last = None
+
+    def slide(self, estimate, std_errors: dict, estimator, structure, dataset) -> float:
+        """T1's slide along the valley (s): the last profiled one where the rule reuses it.
+
+        Else ``valley_slide``'s, kept for the next windows.
+
+        Parameters
+        ----------
+        estimate, std_errors, estimator, structure, dataset
+            As ``first_order_valley``'s: the window's estimate (T1, T2, T3 in s), its errors so far.
+
+        Returns
+        -------
+        float
+            T1's standard error along the valley (s).
+        """
+        if self._last is not None and self._reusable(estimate, std_errors, *self._last):
+            return self._last[1]
+        slide = valley_slide(estimate, estimator, structure, dataset)
+        self._last = (estimate, slide)
+        return slide
+
+    @staticmethod
+    def _reusable(estimate, std_errors: dict, profiled, slide: float) -> bool:
+        """Whether ``estimate`` (own errors ``std_errors``) may take ``slide``, profiled at ``profiled``."""
+        if (estimate.structure.label(), estimate.method) != (profiled.structure.label(), profiled.method):
+            return False
+        (a0, a1), (b0, b1) = profiled.window, estimate.window
+        shared = max(0.0, min(a1, b1) - max(a0, b0)) / max(max(a1, b1) - min(a0, b0), 1e-9)
+        moved = any(
+            not abs(estimate.parameters[n] - profiled.parameters[n]) <= REUSE_STANDARD_ERRORS * std_errors[n]
+            for n in ("T1", "T2", "T3")
+        )
+        limit = TRUSTED_RELATIVE_ERRORS["T1"] * abs(estimate.parameters["T1"])
+        error = max(std_errors["T1"], slide)
+        close = limit / REUSE_CLEAR_FACTOR < error < REUSE_CLEAR_FACTOR * limit
+        return shared >= REUSE_SHARED_SAMPLES and not moved and not close
+
+
+def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset, profile=None) -> dict:
     """Standard errors with T1's at least its slide along the T2 = T3 valley when T2 is told from zero.
 
     When the window cannot tell the second pole T2 from zero (its 95 % interval reaches it), the
@@ -196,6 +262,8 @@ def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset
         The model.
     dataset : Dataset
         The window.
+    profile : ValleyProfile or None
+        The online refits' last profile, reused where its rule allows (None: profiled afresh).
 
     Returns
     -------
@@ -210,7 +278,11 @@ def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset
     if not Z_95 * std_errors["T2"] > t2:
         return std_errors
     if hasattr(estimator, "fit_held"):
-        return dict(std_errors, T1=max(std_errors["T1"], valley_slide(estimate, estimator, structure, dataset)))
+        if profile is None:
+            slide = valley_slide(estimate, estimator, structure, dataset)
+        else:
+            slide = profile.slide(estimate, std_errors, estimator, structure, dataset)
+        return dict(std_errors, T1=max(std_errors["T1"], slide))
     if t2 < FIRST_ORDER_SHARE * t1:
         return dict(std_errors, T1=max(std_errors["T1"], math.sqrt(sum(std_errors[n] ** 2 for n in names))))
     return std_errors

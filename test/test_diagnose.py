@@ -15,7 +15,6 @@ from ship_ident.diagnosis.diagnose import (
     _fit,
     diagnose,
     extrapolation,
-    fold_split_starts,
     free_run,
     judge_across_manoeuvres,
     split,
@@ -96,42 +95,6 @@ def test_validation_on_another_manoeuvre_finds_the_hidden_effect():
     result = diagnose(training, "nomoto2", (), workers=1, validation=other)
     assert result.held_out.duration > 250.0 and result.training.n_samples == training.n_samples
     assert result.verdict == "missing_effect" and result.candidates[0].effect == "wind_yaw"
-
-
-def test_fold_split_starts_keep_the_yaw_time_constant_and_leave_a_determined_fit_alone():
-    determined = {"K": 0.1, "T1": 30.0, "T2": 3.0, "T3": 1.0}
-    assert fold_split_starts(determined) == [] and fold_split_starts({"K": 0.1, "T": 30.0}) == []
-    for folded in ({"K": 0.1, "T1": 57.0, "T2": 0.016, "T3": 1.5}, {"K": 0.1, "T1": 5.2, "T2": 5.2, "T3": 0.0}):
-        starts = fold_split_starts(folded)
-        assert len(starts) == 2
-        for start in starts:
-            effective = folded["T1"] + folded["T2"] - folded["T3"]
-            assert start["T1"] + start["T2"] - start["T3"] == pytest.approx(effective)
-            assert 0.03 * start["T1"] < start["T2"] < start["T1"] and start["K"] == folded["K"]
-
-
-@pytest.mark.slow
-def test_a_slow_ship_fitted_on_its_fold_gets_its_rudder_offset_named_and_fixed():
-    """A slow ship (T1 29 s, T2 1.5 s, T3 0.4 s, 5.7 m/s) with a rudder offset of -10 deg, 40 min of
-    mixed manoeuvres at 2 Hz: nomoto2's search ends on its fold (T2 at its floor), and the rudder
-    offset added from there kept the fold and removed 43 % of the held-out heading error; searched
-    from off the fold too, it removes most of it, with the hull's time constants."""
-    ship = Vessel(
-        "slow ship",
-        "a slow ship",
-        dict(VESSELS["seed001"].parameters, K=0.0312, T1=29.2, T2=1.54, T3=0.406, T=29.2 + 1.54 - 0.406),
-        speed=5.74,
-        rudder_rate=np.radians(3.75),
-        rudder_limit=np.radians(35.0),
-    )
-    truth = {"delta_r": -0.1705}
-    sim = simulate("mixed", ship, ("rudder_offset",), 2400.0, 0.5, seed=3, parameters=truth)
-    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
-    top = result.candidates[0]
-    print(result.estimate.parameters, top.effect, top.improvement, top.estimate.parameters)
-    assert top.effect == "rudder_offset" and top.significant and top.improvement_heading > 0.8
-    assert top.estimate.parameters["T1"] == pytest.approx(29.2, rel=0.1)
-    assert top.estimate.parameters["delta_r"] == pytest.approx(truth["delta_r"], rel=0.05)
 
 
 @pytest.fixture(scope="module")

@@ -35,15 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..diagnosis.diagnose import (
-    DEFAULT_METHOD,
-    _fit,
-    _improvement,
-    candidate_fit,
-    diagnose,
-    free_run,
-    parameter_warnings,
-)
+from ..diagnosis.diagnose import DEFAULT_METHOD, _fit, _improvement, diagnose, free_run, no_worse, parameter_warnings
 from ..model.effects import EFFECTS
 from ..model.simulator import Noise, random_vessel, simulate
 from ..model.structure import Structure
@@ -164,7 +156,7 @@ def fitted_true_improvement(result, hidden: tuple[str, ...]) -> float:
     as a candidate is: from the diagnosed model with the effects neutral and the effects' starts."""
     base = result.estimate.parameters
     true_structure = result.structure.with_effects(result.structure.effect_names + tuple(hidden))
-    true_fit = candidate_fit(
+    true_fit = no_worse(
         _fit(true_structure, result.training, DEFAULT_METHOD, base),
         result.training,
         DEFAULT_METHOD,

@@ -865,95 +865,6 @@ def _equivalent_base(
     return replace(refined, parameters=dict(refined.parameters, **best))
 
 
-FOLD_FOOT = 0.03  # T2 below this share of T1, or T1 within FOLD_REPEATED of T2: a nomoto2 fit on its fold
-FOLD_REPEATED = 0.01
-FOLD_SPLITS = ((0.05, 0.3), (0.05, 3.0))  # (T2, T3 / T2) of the starts off the fold, T2 a share of T1 + T2 - T3
-
-
-def fold_split_starts(parameters: dict) -> list[dict]:
-    """Starts off the fold of a nomoto2 fit (none for other fits).
-
-    A slow ship's nomoto2 search often ends on a fold of its parameter space: T2 at its floor, or
-    T1 = T2. There the shooting cost is flat in how T1 + T2 - T3 (the yaw time constant a first-order
-    model sees) splits into the poles and the zero, while minutes-long free runs are not: a hull with
-    T1 63 s, T2 5.3 s and T3 8.1 s was fitted at T2 0.016 s, and an effect added from that fit removed
-    none of a held-out error the truth halves. The starts keep T1 + T2 - T3 and put T2 at 5 % of it,
-    with T3 a third of T2 or three times it (``FOLD_SPLITS``).
-
-    Parameters
-    ----------
-    parameters : dict
-        A fit's parameters (SI units).
-
-    Returns
-    -------
-    list of dict
-        The parameters with T1, T2 and T3 split off the fold; empty when they are not on it.
-    """
-    if not {"T1", "T2", "T3"} <= parameters.keys():
-        return []
-    t1, t2, t3 = (float(parameters[n]) for n in ("T1", "T2", "T3"))
-    slow, fast = max(t1, t2), min(t1, t2)
-    effective = t1 + t2 - t3
-    if effective <= 0 or (FOLD_FOOT * slow <= fast <= (1.0 - FOLD_REPEATED) * slow):
-        return []
-    starts = []
-    for share, zero in FOLD_SPLITS:
-        fast = share * effective
-        starts.append(dict(parameters, T1=effective - fast + zero * fast, T2=fast, T3=zero * fast))
-    return starts
-
-
-def window_cost(structure: Structure, parameters: dict, fitted_windows: Dataset) -> float:
-    """The output-error cost of the model's free runs on the training windows: the squared heading
-    and yaw-rate RMSE, each over its noise variance (dimensionless). Over windows as long as the
-    held-out ones, where a shooting interval restarts within seconds."""
-    fit = free_run(structure, parameters, fitted_windows).fit
-    return float(
-        (fit["rmse_heading"] / fitted_windows.noise_std("heading")) ** 2
-        + (fit["rmse_yaw_rate"] / fitted_windows.noise_std("yaw_rate")) ** 2
-    )
-
-
-def off_the_fold(fit: Estimate | str, training: Dataset, method: str, nested: dict, fitted_windows: Dataset):
-    """``fit``, or its model refitted from starts off the fold of ``nested`` (the model it extends)
-    when that sits on a fold (``fold_split_starts``): whichever has the lowest ``window_cost`` on the
-    training windows ``fitted_windows`` (a failure unchanged)."""
-    starts = fold_split_starts(nested)
-    if isinstance(fit, str) or not starts or not _estimator(method).uses_starts:
-        return fit
-    structure = fit.structure
-    tries = [fit]
-    for start in starts:
-        try:
-            tries.append(_estimator(method).fit(structure, training, starts=(structure.neutral_effect_start(start),)))
-        except ValueError:  # DataError, StructureError: that start cannot be simulated on these data
-            continue
-    return min(tries, key=lambda t: window_cost(t.structure, t.parameters, fitted_windows))
-
-
-def _fold_base(structure: Structure, estimate: Estimate, refits, fitted_windows: Dataset) -> Estimate | None:
-    """The model at a candidate's fit with the effect dropped, when the model's own fit lies on a
-    fold (``fold_split_starts``) and that runs closer to the training windows (``window_cost``);
-    None otherwise. Off a fold a candidate's search can end where the model's own search from the
-    same starts did not: an effect at its neutral value then "removes" the model's fold error (on a
-    ship with T1 14 s fitted at T2 0.37 s, T3 0.48 s, every candidate gained 60 % of the held-out
-    heading error at T2 = T3 = 2 s)."""
-    if not fold_split_starts(estimate.parameters):
-        return None
-    best, best_cost = None, window_cost(structure, estimate.parameters, fitted_windows)
-    for refit in refits:
-        if not isinstance(refit, Estimate):
-            continue
-        start, _ = _base_start(structure, refit)
-        if start is None:
-            continue
-        cost = window_cost(structure, start, fitted_windows)
-        if cost < best_cost:
-            best, best_cost = start, cost
-    return None if best is None else replace(estimate, parameters=best)
-
-
 NOT_BETTER = "no_better_than_without"  # flag: every fit of the effect ran worse on the training data
 
 
@@ -1002,36 +913,6 @@ def no_worse(
     if error(plain.parameters) <= base_error:
         return plain
     return replace(refit, parameters=start, flags=[*refit.flags, NOT_BETTER])
-
-
-def candidate_fit(
-    refit: Estimate | str, training: Dataset, method: str, nested: dict, fitted_windows: Dataset
-) -> Estimate | str:
-    """A candidate's fit, searched off the fold of its model too, never worse than that model.
-
-    The search also starts off the fold of the model it extends (``off_the_fold``), and the fit
-    never runs worse on the training windows than that model (``no_worse``).
-
-    Parameters
-    ----------
-    refit : Estimate or str
-        The candidate's fit from the model's parameters (``_fit``), or why it failed.
-    training : Dataset
-        The training data.
-    method : str
-        The estimation method (``make_estimator``).
-    nested : dict
-        Parameters of the model the candidate extends (SI units).
-    fitted_windows : Dataset
-        The training windows the free runs are judged on.
-
-    Returns
-    -------
-    Estimate or str
-        The fit ``off_the_fold`` keeps, as ``no_worse`` lets it stand; a failure unchanged.
-    """
-    unfolded = off_the_fold(refit, training, method, nested, fitted_windows)
-    return no_worse(unfolded, training, method, nested, fitted_windows)
 
 
 def _refit_task(args) -> Estimate | str:
@@ -1591,10 +1472,7 @@ def diagnose(
         training, rest = dataset, validation
     say(f"fitting {structure.label()} by {method} on {training.duration:.0f} s, holding out {rest.duration:.0f} s")
     estimate, before = _fit_nested(structure, training, method)
-    longest = max(b - a for a, b in rest.segments) * rest.sample_time
-    first_windows = windows(training, held_out_window(estimate.parameters, longest))
-    estimate = off_the_fold(estimate, training, method, estimate.parameters, first_windows)
-    window = held_out_window(estimate.parameters, longest)
+    window = held_out_window(estimate.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
     held_out = windows(rest, window)
     before_run = free_run(before.structure, before.parameters, held_out) if before else None
     included = {r for e in structure.effects for r in e.replaces}  # terms an effect in the model has already
@@ -1610,8 +1488,7 @@ def diagnose(
 
     def refit_candidates(base: Estimate) -> dict:
         tasks = [(structure.adding(n), training, method, base.parameters) for n in fittable]
-        fits = _map(tasks, workers)
-        return {n: off_the_fold(f, training, method, base.parameters, fitted_windows) for n, f in zip(fittable, fits)}
+        return dict(zip(fittable, _map(tasks, workers)))
 
     fitted_windows = windows(training, window)
     estimate, refits, fitted_run = _settle(structure, training, method, estimate, refit_candidates, fitted_windows, say)
@@ -1732,14 +1609,6 @@ def _settle(structure, training, method, estimate, refit_candidates, fitted_wind
             "noise levels); refitting the candidates from it"
         )
         estimate = rebased
-        refits = refit_candidates(estimate)
-    folded = _fold_base(structure, estimate, refits.values(), fitted_windows)
-    if folded is not None:
-        say(
-            f"a candidate's fit with its effect dropped takes {structure.label()} off the fold its own "
-            "search ended on, closer to the training data: the candidates are refitted from it"
-        )
-        estimate = folded
         refits = refit_candidates(estimate)
     fitted_run = free_run(structure, estimate.parameters, fitted_windows)
     equivalent = _equivalent_base(structure, training, method, refits.values(), fitted_windows, fitted_run)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
-from ship_ident.bench.hidden_effects import draw_case, run_case
-from ship_ident.diagnosis.diagnose import diagnose
+from ship_ident.bench.hidden_effects import best_base_errors, draw_case, run_case, true_improvement
+from ship_ident.diagnosis.diagnose import diagnose, free_run, split, windows
 from ship_ident.model.simulator import Vessel, simulate
+from ship_ident.model.structure import Structure
 
 pytestmark = pytest.mark.slow  # each case simulates and diagnoses a whole recording
 
@@ -160,3 +163,25 @@ def test_a_cubic_damping_on_a_quick_usv_whose_fit_sits_on_the_equal_poles_fold_i
     assert first.estimate.structure.model == "nomoto1" and set(first.second_order["undetermined"]) == {"T1", "T2"}
     for name in ("K", "alpha"):
         assert first.estimate.parameters[name] == pytest.approx(sim.truth[name], rel=0.06), name
+
+
+def test_a_usv_fitted_on_its_fold_is_judged_fair_against_its_base_model_refitted_from_the_truth():
+    """A USV (T1 3.6 s, T2 1.05 s) with nothing hidden whose base fit is put on the fold T2 = 0
+    (T1 + T2 - T3 kept): its true model "removes" 84 % of that fit's held-out error, all of it what
+    the base model refitted from the vessel's true time constants removes too. Against the best
+    base-model fit the true model gains nothing, so a case whose effect would only gain that is not
+    counted fair."""
+    vessel, _, sim = draw_case(4, (), duration=600.0, vessel_kind="usv")
+    structure = Structure("nomoto2")
+    truth = {name: vessel.parameters[name] for name in structure.parameter_names}
+    fast = 0.01 * truth["T1"]
+    folded = dict(truth, T1=truth["T1"] + truth["T2"] - truth["T3"] - fast + 0.3 * fast, T2=fast, T3=0.3 * fast)
+    training, rest = split(sim.dataset)
+    held_out = windows(rest, 60.0)
+    fitted = SimpleNamespace(structure=structure, training=training, held_out=held_out)
+    fitted.run = free_run(structure, folded, held_out)
+    best = best_base_errors(fitted, vessel)
+    over_folded = true_improvement(fitted, (), truth)
+    assert over_folded > 0.5
+    assert best["rmse_heading"] < 0.5 * fitted.run.fit["rmse_heading"]
+    assert true_improvement(fitted, (), truth, best) < 0.1

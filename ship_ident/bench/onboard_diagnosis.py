@@ -58,7 +58,15 @@ from ..model.effects import EFFECTS
 from ..online.config import OnlineConfig
 from . import Option, progress, register
 from .common import table
-from .hidden_effects import FAIR_SHARE, HALVING, MANOEUVRES, SAMPLE_TIME_S, draw_case, true_improvement
+from .hidden_effects import (
+    FAIR_SHARE,
+    HALVING,
+    MANOEUVRES,
+    SAMPLE_TIME_S,
+    best_base_errors,
+    draw_case,
+    true_improvement,
+)
 
 KINDS = tuple(EFFECTS)  # hidden in turn
 TRIP_S = 900.0  # s, one trip
@@ -293,7 +301,8 @@ def run_trip(
         first = [d for d in done if named_effects(d)[:1] == [kind]]
         row["named_first_at"] = first[0]["stamp"] if first else None
         early = sim.dataset.slice(0, int(round(named_by_s / sim.dataset.sample_time)))
-        row["true_improvement"] = true_improvement(diagnose(early, "nomoto2", (), workers=1), (kind,), sim.truth)
+        judged = diagnose(early, "nomoto2", (), workers=1)
+        row["true_improvement"] = true_improvement(judged, (kind,), sim.truth, best_base_errors(judged, vessel))
         row["fair"] = bool(row["true_improvement"] >= FAIR_SHARE)
         row["named_in_time"] = row["named_at"] is not None and row["named_at"] <= named_by_s
         row["named_first_in_time"] = row["named_first_at"] is not None and row["named_first_at"] <= named_by_s

@@ -453,6 +453,10 @@ def main(argv=None) -> int:
     finally:
         node.shutdown()
         executor.remove_node(node)
+        executor.shutdown()
+        # The events executor holds the node's QoS events until it is destroyed; destroyed after the
+        # node and the context, it released freed events and the process died of SIGSEGV on exit.
+        del executor
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

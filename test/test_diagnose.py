@@ -9,14 +9,18 @@ import numpy as np
 import pytest
 
 from ship_ident import cli
+from ship_ident.bench.hidden_effects import draw_case
 from ship_ident.diagnosis.diagnose import (
+    DEFAULT_METHOD,
     NOT_BETTER,
     Candidate,
     _fit,
     diagnose,
     extrapolation,
     free_run,
+    held_out_window,
     judge_across_manoeuvres,
+    no_worse,
     split,
     windows,
 )
@@ -392,3 +396,47 @@ def test_the_acceleration_form_of_a_course_stable_hull_is_its_nomoto_model(model
     without = free_run(Structure(model, ()), base, data)
     scale = np.std(with_effect.yaw_rate)
     assert scale > 0.005 and np.max(np.abs(with_effect.yaw_rate - without.yaw_rate)) < 1e-3 * scale
+
+
+def _fitted_with_and_without(seed: int, effect: str):
+    """A drawn vessel's record with ``effect`` hidden: its base fit, the candidate's fit with the
+    effect started from it (``no_worse``), the true parameters and the diagnosis's held-out free-run
+    windows."""
+    _, _, sim = draw_case(seed, (effect,))
+    training, rest = split(sim.dataset)
+    base = _fit(Structure("nomoto2"), training, DEFAULT_METHOD)
+    longest = max(b - a for a, b in rest.segments) * rest.sample_time
+    window = held_out_window(base.parameters, longest)
+    fit = _fit(Structure("nomoto2", (effect,)), training, DEFAULT_METHOD, base.parameters)
+    fit = no_worse(fit, training, DEFAULT_METHOD, base.parameters, windows(training, window))
+    return base, fit, sim.truth, windows(rest, window)
+
+
+def test_a_usv_rudder_delay_started_from_a_base_fit_on_the_fold_is_found():
+    """A USV (T1 11.5 s, T2 1.3 s, T3 2.4 s) with a 4 s rudder delay: fitted without the delay the
+    poles meet (T1 = T2 = 6.3 s), and a search started on that fold, where the cost is symmetric
+    in T1 and T2, stayed on it (tau 3.5 s, T1 = T2 = 10.3 s). Started off the fold it finds the
+    delay and the hull's slow pole, and removes on the held-out part most of what the truth removes."""
+    base, fit, truth, held_out = _fitted_with_and_without(1128528493, "rudder_delay")
+    assert base.parameters["T1"] == pytest.approx(base.parameters["T2"], rel=0.01)
+    assert fit.parameters["tau"] == pytest.approx(truth["tau"], rel=0.05)
+    assert fit.parameters["T1"] == pytest.approx(truth["T1"], rel=0.05)
+    assert fit.parameters["T2"] < 0.25 * fit.parameters["T1"]
+
+    def held_out_error(structure, parameters):
+        return free_run(structure, parameters, held_out).fit["rmse_heading"]
+
+    before = held_out_error(base.structure, base.parameters)
+    true_gain = before - held_out_error(fit.structure, truth)
+    assert before - held_out_error(fit.structure, fit.parameters) >= 0.6 * true_gain > 0
+
+
+def test_a_usv_quadratic_damping_whose_search_stopped_on_a_bound_is_found_from_its_base_model():
+    """A USV (T1 6.6 s, T2 1.3 s) whose yaw damping grows as r|r|: the search in the acceleration
+    form from the regression's start stopped unconverged with the rudder lead on its bound (a fast
+    pole of 0.02 s, a training cost 1.5 times higher); searched again from the base model with the
+    damping neutral, the candidate reaches the true damping."""
+    _, fit, truth, _ = _fitted_with_and_without(597922734, "quadratic_yaw")
+    assert fit.parameters["d_q"] == pytest.approx(truth["d_q"], rel=0.05)
+    assert fit.parameters["m2"] == pytest.approx(truth["m2"], rel=0.05)
+    assert fit.parameters["b1"] == pytest.approx(truth["b1"], rel=0.1)

@@ -943,6 +943,70 @@ def no_worse(
     return replace(refit, parameters=start, flags=[*refit.flags, NOT_BETTER])
 
 
+VALLEY_SHARES = (0.05, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the points tried along the T2 - T3 valley
+VALLEY_GAIN = 0.1  # a point replaces the fit when its training free runs miss the heading this much less
+VALLEY_RATIO = 2.0  # a fit is in the valley when T3 / T2 lies within this factor of 1
+
+
+def along_the_valley(refit: Estimate | str, training: Dataset, method: str, fitted_windows: Dataset) -> Estimate | str:
+    """A nomoto2 fit whose rudder lead T3 nearly cancels its second pole T2 (T3 / T2 within
+    ``VALLEY_RATIO`` of 1), moved along that valley to where its free runs on the training windows
+    run closest to the data.
+
+    Where the zero (1 + T3 s) nearly cancels the pole (1 + T2 s), the search's short shooting
+    intervals determine T2 - T3 and hardly where the pair lies, while free runs of the held-out
+    windows' length do see it. The points tried hold T2 at ``VALLEY_SHARES`` of T1 and T3 at T2 less
+    the fit's T2 - T3, the other parameters refitted; the one whose free runs on ``fitted_windows``
+    miss the heading least replaces the fit when it misses by ``VALLEY_GAIN`` less and the yaw rate
+    by no more (``MIN_TRAINING_GAIN``). A slow ship with a rudder offset was fitted at T2 11 s,
+    T3 8.7 s (truth 1.4 and 0.5 s): along the valley the search's cost changed by 0.3 %, the
+    training free runs' heading error by half, and the held-out one with it.
+
+    Parameters
+    ----------
+    refit : Estimate or str
+        The fit, or why it failed.
+    training : Dataset
+        The training data.
+    method : str
+        The estimation method (``make_estimator``).
+    fitted_windows : Dataset
+        The training windows the free runs are judged on.
+
+    Returns
+    -------
+    Estimate or str
+        The fit, moved along the valley or not; a failure unchanged.
+    """
+    if isinstance(refit, str):
+        return refit
+    structure, parameters = refit.structure, refit.parameters
+    estimator = _estimator(method)
+    free = structure.free_names
+    if not estimator.uses_starts or "T2" not in free or "T3" not in free:
+        return refit
+    if not 1.0 / VALLEY_RATIO <= parameters["T3"] / parameters["T2"] <= VALLEY_RATIO:
+        return refit
+
+    def errors(values: dict) -> tuple[float, float]:
+        fit = free_run(structure, values, fitted_windows).fit
+        return fit["rmse_heading"], fit["rmse_yaw_rate"]
+
+    lead_gap = parameters["T2"] - parameters["T3"]
+    heading, yaw_rate = errors(parameters)
+    best, best_heading = None, (1.0 - VALLEY_GAIN) * heading
+    for share in VALLEY_SHARES:
+        second = share * parameters["T1"]
+        start = dict(parameters, T2=second, T3=max(second - lead_gap, 0.0))
+        point, _ = estimator.held_point(structure, training, refit, start, ("T2", "T3"), parameters)
+        point_heading, point_yaw_rate = errors(point)
+        if point_heading < best_heading and point_yaw_rate <= (1.0 + MIN_TRAINING_GAIN) * yaw_rate:
+            best, best_heading = point, point_heading
+    if best is None:
+        return refit
+    return estimator.fit_held(structure, training, refit, best, ("T2", "T3"))
+
+
 def _refit_task(args) -> Estimate | str:
     try:
         return _fit(*args)
@@ -1520,11 +1584,17 @@ def diagnose(
 
     fitted_windows = windows(training, window)
     estimate, refits, fitted_run = _settle(structure, training, method, estimate, refit_candidates, fitted_windows, say)
+    moved = along_the_valley(estimate, training, method, fitted_windows)
+    if moved is not estimate:
+        estimate, fitted_run = moved, free_run(structure, moved.parameters, fitted_windows)
     # the model the candidates are judged against is settled: its held-out run and residual evidence
     run = free_run(structure, estimate.parameters, held_out)
     context = residual_context(structure, estimate.parameters, dataset)
     evidences = {name: EFFECTS[name].evidence(context) for name in names}
-    refits = {n: no_worse(r, training, method, estimate.parameters, fitted_windows) for n, r in refits.items()}
+    refits = {
+        n: along_the_valley(no_worse(r, training, method, estimate.parameters, fitted_windows), training, method, fitted_windows)
+        for n, r in refits.items()
+    }
     refits = shared_fits(refits, training, method, fitted_windows)
     judged = (held_out, run, fitted_windows, fitted_run)
     candidates = _judge_candidates(names, evidences, refits, judged, estimate, validation is not None)

@@ -1591,10 +1591,8 @@ def diagnose(
     run = free_run(structure, estimate.parameters, held_out)
     context = residual_context(structure, estimate.parameters, dataset)
     evidences = {name: EFFECTS[name].evidence(context) for name in names}
-    refits = {
-        n: along_the_valley(no_worse(r, training, method, estimate.parameters, fitted_windows), training, method, fitted_windows)
-        for n, r in refits.items()
-    }
+    refits = {n: no_worse(r, training, method, estimate.parameters, fitted_windows) for n, r in refits.items()}
+    refits = {n: along_the_valley(r, training, method, fitted_windows) for n, r in refits.items()}
     refits = shared_fits(refits, training, method, fitted_windows)
     judged = (held_out, run, fitted_windows, fitted_run)
     candidates = _judge_candidates(names, evidences, refits, judged, estimate, validation is not None)

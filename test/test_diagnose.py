@@ -464,3 +464,16 @@ def test_a_slow_ship_fitted_where_its_rudder_lead_cancels_its_second_pole_is_mov
         return free_run(structure, estimate.parameters, held_out).fit["rmse_heading"]
 
     assert held_out_error(moved) < 0.67 * held_out_error(in_valley)
+
+
+def test_a_usv_rudder_delay_its_rudder_lead_cancels_is_found_from_the_polished_delay_grid():
+    """A USV (T1 2.7 s, T2 0.22 s) whose rudder lead T3 1.1 s nearly cancels its 1.2 s delay: at
+    low frequencies exp(-tau s) (1 + T3 s) ~ 1, and fitted without the delay its lead is 0. Searched
+    from whichever start costs least as given (the regression's), the candidate stopped at T2 0.01 s,
+    tau 0.8 s, with 2.3 times the training cost of the truth; the delay grid's starts, polished
+    before they are compared, lead to the true delay and lead."""
+    _, fit, truth, _ = _fitted_with_and_without(2134452615, "rudder_delay")
+    print(fit.parameters)
+    assert fit.parameters["tau"] == pytest.approx(truth["tau"], rel=0.05)
+    assert fit.parameters["T3"] == pytest.approx(truth["T3"], rel=0.1)
+    assert fit.parameters["T1"] == pytest.approx(truth["T1"], rel=0.05)

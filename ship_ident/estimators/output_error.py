@@ -447,6 +447,32 @@ class OutputError(Estimator):
                 estimate = again
         return estimate
 
+    def fit_polished(self, structure: Structure, dataset: Dataset, starts: tuple) -> Estimate:
+        """Minimise the free-run error from ``starts`` alone, each polished before they are compared.
+
+        Every start's gain, rudder offset and interval states are fitted first (they enter the free
+        run linearly), and a range of main time constants is tried beside them, as a cold fit that
+        missed the time scale explores (``fit``); no regression start. A second opinion for starts
+        whose costs as given do not tell their basins apart: a start a rudder delay's lead hides
+        in looks as close to the data as one that leads to the delay.
+
+        Parameters
+        ----------
+        structure : Structure
+            The model to fit.
+        dataset : Dataset
+            The data: rudder, heading, yaw rate (rad, rad/s) on a uniform grid, split at gaps.
+        starts : tuple of dict
+            Parameter sets (SI units) holding every parameter of ``structure``.
+
+        Returns
+        -------
+        Estimate
+            As ``fit``'s.
+        """
+        first = Estimate(structure, "polished start", dict(starts[0]), {}, {}, dataset.n_samples)
+        return self._refine(structure, dataset, first, tuple(starts), explore=True)
+
     def fit_held(
         self,
         structure: Structure,

@@ -201,6 +201,22 @@ def fitted_true_improvement(result, hidden: tuple[str, ...]) -> float:
     )
 
 
+def fairness(result, hidden: tuple[str, ...], truth: dict, vessel) -> dict:
+    """Whether a case hiding ``hidden`` (true parameters ``truth`` on ``vessel``) is fair for the
+    diagnosis ``result`` (a ``diagnose.Diagnosis``): the true model removes ``FAIR_SHARE`` of the
+    best base fit's held-out error (``true_improvement``, ``truth_removes_half``) and more of the
+    diagnosed model's than any other effect's candidate (``true_improvement_over_diagnosed`` against
+    ``rival_improvement``); ``fair`` both."""
+    out = {
+        "true_improvement": true_improvement(result, hidden, truth, best_base_errors(result, vessel)),
+        "true_improvement_over_diagnosed": true_improvement(result, hidden, truth),
+        "rival_improvement": max((c.improvement for c in result.candidates if c.effect not in hidden), default=-np.inf),
+    }
+    out["truth_removes_half"] = bool(out["true_improvement"] >= FAIR_SHARE)
+    out["fair"] = out["truth_removes_half"] and out["true_improvement_over_diagnosed"] > out["rival_improvement"]
+    return out
+
+
 def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
     """One case: simulate ``hidden`` on a vessel drawn from ``seed``, diagnose, check fairness."""
     vessel, manoeuvre, sim = draw_case(seed, hidden)
@@ -217,12 +233,7 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
     }
     if hidden:
         row["fitted_true_improvement"] = fitted_true_improvement(result, hidden)
-        row["true_improvement"] = true_improvement(result, hidden, sim.truth, best_base_errors(result, vessel))
-        row["true_improvement_over_diagnosed"] = true_improvement(result, hidden, sim.truth)
-        rivals = [c.improvement for c in result.candidates if c.effect not in hidden]
-        row["rival_improvement"] = max(rivals, default=-np.inf)
-        row["truth_removes_half"] = bool(row["true_improvement"] >= FAIR_SHARE)
-        row["fair"] = row["truth_removes_half"] and row["true_improvement_over_diagnosed"] > row["rival_improvement"]
+        row.update(fairness(result, hidden, sim.truth, vessel))
         pair = top.near_equivalent if len(top.near_equivalent) == 1 else []  # several: no naming
         named = [c for c in result.candidates if c.effect in hidden and c.effect in (top.effect, *pair)]
         row["named_first_alone"] = top.effect in hidden

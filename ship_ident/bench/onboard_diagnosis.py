@@ -11,7 +11,8 @@ vessel's kind (a slow ship's crew gives it ten minutes). Three kinds of trip:
   (``hidden_effects.draw_case``: quick USVs to slow ships, a strength that matters on that vessel
   in that manoeuvre). One is **fair** when the true structure at its known parameters removes at
   least ``hidden_effects.FAIR_SHARE`` of the held-out error of a one-shot ``diagnose`` of the trip's
-  first ``NAMED_BY_S`` s (the fairness of ``hidden-effects``, judged without the code under test);
+  first ``NAMED_BY_S`` s, and more of it than any other effect's candidate there
+  (``hidden_effects.fairness``);
 * **none trips** (``--none-trips``, default ``NONE_COUNT``): nothing hidden, USVs and ships in turn,
   each manoeuvre of ``NONE_MANOEUVRES`` in turn (steady legs and turns as well as zigzags and steps);
 * **MMG trips** (``--mmg-trips``, default ``MMG_COUNT``): 15 minutes of random rudder steps on a
@@ -58,15 +59,7 @@ from ..model.effects import EFFECTS
 from ..online.config import OnlineConfig
 from . import Option, progress, register
 from .common import table
-from .hidden_effects import (
-    FAIR_SHARE,
-    HALVING,
-    MANOEUVRES,
-    SAMPLE_TIME_S,
-    best_base_errors,
-    draw_case,
-    true_improvement,
-)
+from .hidden_effects import HALVING, MANOEUVRES, SAMPLE_TIME_S, draw_case, fairness
 
 KINDS = tuple(EFFECTS)  # hidden in turn
 TRIP_S = 900.0  # s, one trip
@@ -302,8 +295,7 @@ def run_trip(
         row["named_first_at"] = first[0]["stamp"] if first else None
         early = sim.dataset.slice(0, int(round(named_by_s / sim.dataset.sample_time)))
         judged = diagnose(early, "nomoto2", (), workers=1)
-        row["true_improvement"] = true_improvement(judged, (kind,), sim.truth, best_base_errors(judged, vessel))
-        row["fair"] = bool(row["true_improvement"] >= FAIR_SHARE)
+        row.update(fairness(judged, (kind,), sim.truth, vessel))
         row["named_in_time"] = row["named_at"] is not None and row["named_at"] <= named_by_s
         row["named_first_in_time"] = row["named_first_at"] is not None and row["named_first_at"] <= named_by_s
     return row

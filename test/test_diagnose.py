@@ -477,3 +477,25 @@ def test_a_usv_rudder_delay_its_rudder_lead_cancels_is_found_from_the_polished_d
     assert fit.parameters["tau"] == pytest.approx(truth["tau"], rel=0.05)
     assert fit.parameters["T3"] == pytest.approx(truth["T3"], rel=0.1)
     assert fit.parameters["T1"] == pytest.approx(truth["T1"], rel=0.05)
+
+
+def test_a_course_unstable_slow_ship_stopped_in_its_lead_pole_valley_is_moved_along_it():
+    """A slow, course-unstable ship (a1 -0.024 1/s, fast pole m2 1.6 s, rudder lead b1 / b0 1.1 s):
+    its candidate's search stopped unconverged at m2 0.16 s with a lead that nearly cancels it, the
+    valley of the acceleration form. Along it the search's cost falls and the training free runs run
+    closer; moved there and searched on, the fit finds the fast pole and runs free on the held-out
+    part as close as the truth."""
+    base, fit, truth, held_out = _fitted_with_and_without(493460522, "course_instability")
+    assert fit.parameters["m2"] < 0.2 * truth["m2"]  # in the valley's wrong end
+    training, rest = split(draw_case(493460522, ("course_instability",))[2].dataset)
+    window = held_out_window(base.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
+    moved = along_the_valley(fit, training, DEFAULT_METHOD, windows(training, window))
+    print(moved.parameters)
+    assert moved.parameters["m2"] == pytest.approx(truth["m2"], rel=0.15)
+    assert moved.parameters["a1"] == pytest.approx(truth["a1"], rel=0.1)
+
+    def held_out_error(parameters):
+        return free_run(fit.structure, parameters, held_out).fit["rmse_heading"]
+
+    assert held_out_error(moved.parameters) < 1.05 * held_out_error(truth)
+    assert held_out_error(moved.parameters) < 0.9 * held_out_error(fit.parameters)

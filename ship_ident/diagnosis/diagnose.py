@@ -963,24 +963,30 @@ def no_worse(
     return replace(refit, parameters=start, flags=[*refit.flags, NOT_BETTER])
 
 
-VALLEY_SHARES = (0.05, 0.1, 0.2, 0.35, 0.5)  # T2 / T1 of the points tried along the T2 - T3 valley
+VALLEY_SHARES = (0.02, 0.035, 0.05, 0.1, 0.2, 0.35, 0.5)  # pole over slow time of the points tried along the valley
 VALLEY_GAIN = 0.1  # a point replaces the fit when its training free runs miss the heading this much less
-VALLEY_RATIO = 2.0  # a fit is in the valley when T3 / T2 lies within this factor of 1
+VALLEY_RATIO = 2.0  # a fit is in the valley when its lead over its pole lies within this factor of 1
 
 
 def along_the_valley(refit: Estimate | str, training: Dataset, method: str, fitted_windows: Dataset) -> Estimate | str:
-    """A nomoto2 fit whose rudder lead T3 nearly cancels its second pole T2 (T3 / T2 within
-    ``VALLEY_RATIO`` of 1), moved along that valley to where its free runs on the training windows
-    run closest to the data.
+    """A second-order fit whose rudder lead nearly cancels its second pole (their times within
+    ``VALLEY_RATIO`` of each other), moved along that valley to where its free runs on the training
+    windows run closest to the data.
 
     Where the zero (1 + T3 s) nearly cancels the pole (1 + T2 s), the search's short shooting
     intervals determine T2 - T3 and hardly where the pair lies, while free runs of the held-out
-    windows' length do see it. The points tried hold T2 at ``VALLEY_SHARES`` of T1 and T3 at T2 less
-    the fit's T2 - T3, the other parameters refitted; the one whose free runs on ``fitted_windows``
-    miss the heading least replaces the fit when it misses by ``VALLEY_GAIN`` less and the yaw rate
-    by no more (``MIN_TRAINING_GAIN``). A slow ship with a rudder offset was fitted at T2 11 s,
+    windows' length do see it. The points tried hold the pole's time at ``VALLEY_SHARES`` of the slow
+    time and the lead at the pole's less the fit's gap, the other parameters refitted; the one whose
+    free runs on ``fitted_windows`` miss the heading least replaces the fit when it misses by
+    ``VALLEY_GAIN`` less, or by any less where the search's own cost is lower too (the search
+    stopped short of it), and the yaw rate by no more (``MIN_TRAINING_GAIN``); it is refitted with
+    the pair held there, then searched free from that refit, which is kept when its free runs miss
+    the heading no more. In the Nomoto form the pole is T2, the lead T3 and the slow time T1; in the
+    acceleration form (r' = -m2 r'' - a1 r + b0 delta + b1 delta') the pole is m2, the lead b1 / b0
+    and the slow time 1 / |a1| (a course-unstable hull's too). A slow ship with a rudder offset was fitted at T2 11 s,
     T3 8.7 s (truth 1.4 and 0.5 s): along the valley the search's cost changed by 0.3 %, the
-    training free runs' heading error by half, and the held-out one with it.
+    training free runs' heading error by half, and the held-out one with it; a course-unstable
+    one stopped unconverged at m2 0.16 s (truth 1.6 s), where the cost falls along the valley.
 
     Parameters
     ----------
@@ -1003,28 +1009,51 @@ def along_the_valley(refit: Estimate | str, training: Dataset, method: str, fitt
     structure, parameters = refit.structure, refit.parameters
     estimator = _estimator(method)
     free = structure.free_names
-    if not estimator.uses_starts or "T2" not in free or "T3" not in free:
+    if not estimator.uses_starts:
         return refit
-    if not 1.0 / VALLEY_RATIO <= parameters["T3"] / parameters["T2"] <= VALLEY_RATIO:
+    if "T2" in free and "T3" in free:
+        held, pole, lead, slow = ("T2", "T3"), parameters["T2"], parameters["T3"], parameters["T1"]
+
+        def valley_point(pole_time: float, lead_time: float) -> dict:
+            return {"T2": pole_time, "T3": lead_time}
+
+    elif "m2" in free and "b1" in free and parameters["b0"] > 0 and parameters["a1"] != 0:
+        held, pole, lead, slow = (
+            ("m2", "b1"),
+            parameters["m2"],
+            parameters["b1"] / parameters["b0"],
+            1 / abs(parameters["a1"]),
+        )
+
+        def valley_point(pole_time: float, lead_time: float) -> dict:
+            return {"m2": pole_time, "b1": parameters["b0"] * lead_time}
+
+    else:
+        return refit
+    if not (pole > 0 and 1.0 / VALLEY_RATIO <= lead / pole <= VALLEY_RATIO):
         return refit
 
     def errors(values: dict) -> tuple[float, float]:
         fit = free_run(structure, values, fitted_windows).fit
         return fit["rmse_heading"], fit["rmse_yaw_rate"]
 
-    lead_gap = parameters["T2"] - parameters["T3"]
+    lead_gap = pole - lead
     heading, yaw_rate = errors(parameters)
-    best, best_heading = None, (1.0 - VALLEY_GAIN) * heading
+    _, fit_cost = estimator.held_point(structure, training, refit, dict(parameters), tuple(free), parameters)
+    best, best_heading = None, heading
     for share in VALLEY_SHARES:
-        second = share * parameters["T1"]
-        start = dict(parameters, T2=second, T3=max(second - lead_gap, 0.0))
-        point, _ = estimator.held_point(structure, training, refit, start, ("T2", "T3"), parameters)
+        pole_time = share * slow
+        start = dict(parameters, **valley_point(pole_time, max(pole_time - lead_gap, 0.0)))
+        point, cost = estimator.held_point(structure, training, refit, start, held, parameters)
         point_heading, point_yaw_rate = errors(point)
-        if point_heading < best_heading and point_yaw_rate <= (1.0 + MIN_TRAINING_GAIN) * yaw_rate:
+        closer = point_heading < (1.0 - VALLEY_GAIN) * heading or cost < fit_cost
+        if closer and point_heading < best_heading and point_yaw_rate <= (1.0 + MIN_TRAINING_GAIN) * yaw_rate:
             best, best_heading = point, point_heading
     if best is None:
         return refit
-    return estimator.fit_held(structure, training, refit, best, ("T2", "T3"))
+    moved = estimator.fit_held(structure, training, refit, best, held)
+    loose = estimator.fit_held(structure, training, moved, dict(moved.parameters), ())
+    return loose if errors(loose.parameters)[0] <= errors(moved.parameters)[0] else moved
 
 
 def _refit_task(args) -> Estimate | str:

@@ -987,10 +987,11 @@ def along_the_valley(refit: Estimate | str, training: Dataset, method: str, fitt
     the pair held there, then searched free from that refit, which is kept when its free runs miss
     the heading no more. In the Nomoto form the pole is T2, the lead T3 and the slow time T1; in the
     acceleration form (r' = -m2 r'' - a1 r + b0 delta + b1 delta') the pole is m2, the lead b1 / b0
-    and the slow time 1 / |a1| (a course-unstable hull's too). A slow ship with a rudder offset was fitted at T2 11 s,
-    T3 8.7 s (truth 1.4 and 0.5 s): along the valley the search's cost changed by 0.3 %, the
-    training free runs' heading error by half, and the held-out one with it; a course-unstable
-    one stopped unconverged at m2 0.16 s (truth 1.6 s), where the cost falls along the valley.
+    and the slow time 1 / |a1| (a course-unstable hull's too). A slow ship with a rudder offset was
+    fitted at T2 11 s, T3 8.7 s (truth 1.4 and 0.5 s): along the valley the search's cost changed
+    by 0.3 %, the training free runs' heading error by half, and the held-out one with it; a
+    course-unstable one stopped unconverged at m2 0.16 s (truth 1.6 s), where the cost falls along
+    the valley.
 
     Parameters
     ----------

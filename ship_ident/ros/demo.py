@@ -168,19 +168,24 @@ class Listener:
         """The stamp (s, node clock) of the newest estimate record received, None before the first."""
         return self.estimates[-1]["stamp"] if self.estimates else None
 
-    def pace_by_node(self, lead: float, timeout: float):
+    def pace_by_node(self, lead, timeout: float):
         """A ``Player.play`` hold that keeps /clock at most ``lead`` s (simulated) past the node's
         newest refit, waiting up to ``timeout`` s of wall time for the node to catch up (and
         processing the node's outputs meanwhile): a node starved of CPU slows the play, not loses
-        samples stamped on arrival. Raises TimeoutError saying how far the node got."""
+        samples stamped on arrival. ``lead`` is a number, or a function of the listener giving it
+        (a tighter lead while the node publishes at every tick of its timer). Raises TimeoutError
+        saying how far the node got."""
+
+        def allowed() -> float:
+            return lead(self) if callable(lead) else lead
 
         def hold(stamp: float) -> None:
             for _ in range(HOLD_CALLBACKS):
                 self.executor.spin_once(timeout_sec=0)
             newest = self.newest_refit()
-            if newest is None or stamp - newest <= lead:
+            if newest is None or stamp - newest <= allowed():
                 return
-            if not self.spin(timeout, lambda: stamp - self.newest_refit() <= lead):
+            if not self.spin(timeout, lambda: stamp - self.newest_refit() <= allowed()):
                 raise TimeoutError(
                     f"the node's newest refit is at {self.newest_refit():g} s, the clock at {stamp:g} s, "
                     f"after {timeout:g} s of waiting"

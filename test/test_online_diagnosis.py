@@ -63,14 +63,15 @@ def test_a_hidden_wind_is_named_added_by_itself_and_the_held_out_error_halves():
 
 
 @pytest.mark.slow
-def test_nothing_hidden_raises_no_missing_effect_in_30_minutes():
-    """The model the boat has: 29 diagnoses over 30 min, none missing_effect, nothing auto-added,
-    the held-out error at the noise floor."""
+def test_nothing_hidden_raises_no_missing_effect_in_a_15_minute_trip():
+    """The model the boat has: 14 diagnoses over 15 min (a trip of ``bench onboard-diagnosis``, whose
+    none trips hold 30 more), none missing_effect, nothing auto-added, the held-out error at the
+    noise floor."""
     config = OnlineConfig(window_length=120.0, refit_period=30.0, diagnosis_period=60.0, auto_add_effects=True)
-    sim = simulate("random", effects=SEED_EFFECTS, duration=1800.0, seed=1)
+    sim = simulate("random", effects=SEED_EFFECTS, duration=900.0, seed=1)
     events = diagnosed(sim, config)
     done = [d for _, d in events if d["status"] == "done"]
-    assert len(done) >= 25
+    assert len(done) >= 12
     assert not [d["verdict_sentence"] for d in done if d["verdict"] == "missing_effect"]
     assert not any("auto_add" in d for d in done)
     assert not any("missing_effect" in r.conditions for r, _ in events)

@@ -318,3 +318,24 @@ def test_a_near_equivalent_group_is_led_by_a_candidate_whose_parameters_the_data
     assert OnlineDiagnosis._determined_lead(pool, "wind_yaw", {"wind_yaw"}) == "rudder_offset"
     assert OnlineDiagnosis._determined_lead(pool, "wind_yaw", set()) == "wind_yaw"
     assert OnlineDiagnosis._determined_lead(pool, "wind_yaw", {"wind_yaw", "rudder_offset"}) == "wind_yaw"
+
+
+def test_a_tanker_whose_first_short_window_fit_missed_widely_is_judged_on_every_minute_alike():
+    """The first slice of a trip is held out by a window of two minutes, whose fit misses by six times
+    what the later ten-minute fits do, and there the candidate runs a little worse; in every later
+    minute it removes a third of the error. Each slice counting by its samples, the candidate is named
+    within ten minutes; weighed by its squared errors, the first slice would hold it off."""
+    rng = np.random.default_rng(4)
+    diagnosis, config = OnlineDiagnosis(), OnlineConfig(effects=())
+    plan = [(swell(20.0, 12.0), {"speed_dependence": swell(20.0, 13.0)})]
+    plan += [(swell(20.0, 2.0), {"speed_dependence": swell(20.0, 1.2)})] * 9
+    verdicts = []
+    for k, (missed, left) in enumerate(plan):
+        result = drawn_diagnosis(60.0 * (k + 2), missed, left, rng)
+        diagnosis.finish(result, config)
+        verdicts.append(result["verdict"])
+    first_slice, later = drawn_diagnosis(0.0, *plan[0], rng), drawn_diagnosis(0.0, *plan[1], rng)
+    squares = [piece["held_out_slice"]["squares"][0] for piece in (first_slice, later)]
+    assert squares[0] > 20 * squares[1]  # the first slice's squared error outweighs a later one's 20 times
+    assert "missing_effect" in verdicts[:9]
+    assert result["candidates"][0]["effect"] == "speed_dependence"

@@ -7,6 +7,7 @@ import pytest
 from scipy import signal
 
 from ship_ident.model.dataset import DataError, Dataset, cut_segments, median_above, resample_series
+from ship_ident.model.filters import convolve_columns, savgol
 from ship_ident.model.simulator import simulate
 from ship_ident.model.structure import Structure, StructureError
 
@@ -178,3 +179,28 @@ def test_segments_are_cut_into_near_equal_or_whole_pieces_that_never_cross_a_gap
     assert cut_segments(segments, 30, align="end") == ((0, 10), (10, 40), (40, 70), (70, 100), (120, 125))
     assert cut_segments(segments, 30, min_samples=6, align="end") == ((0, 10), (10, 40), (40, 70), (70, 100))
     assert cut_segments(segments, 30, align="end", whole=True) == ((10, 40), (40, 70), (70, 100))
+
+
+@pytest.mark.parametrize("deriv", [0, 1, 2])
+def test_savitzky_golay_is_exact_on_a_polynomial_of_its_degree_to_both_ends(deriv):
+    """A quartic sampled every 0.1 s: the degree-4 filter returns it, or its derivatives, exactly,
+    inside and within half a window of either end."""
+    h = 0.1
+    t = np.arange(200) * h
+    coefficients = np.array([0.002, -0.03, 0.1, 0.5, -1.0])  # t^4 .. t^0
+    polynomial = np.polyder(coefficients, deriv) if deriv else coefficients
+    assert savgol(np.polyval(coefficients, t), 21, 4, deriv, h) == pytest.approx(np.polyval(polynomial, t), abs=1e-8)
+
+
+@pytest.mark.parametrize("taps", [5, 601])
+def test_centred_convolution_of_columns_matches_the_sum_over_the_taps(taps):
+    """Short kernels directly, long ones through the FFT: each output sample is the sum of the taps
+    times the samples they cover (zeros beyond the ends), for columns shorter than the kernel too."""
+    rng = np.random.default_rng(5)
+    kernel = rng.standard_normal(taps)
+    for rows in (40, 1000):
+        signals = rng.standard_normal((rows, 3))
+        half = taps // 2
+        padded = np.vstack([np.zeros((half, 3)), signals, np.zeros((half, 3))])
+        expected = np.array([kernel[::-1] @ padded[k : k + taps] for k in range(rows)])
+        assert convolve_columns(signals, kernel) == pytest.approx(expected, abs=1e-9)

@@ -60,6 +60,7 @@ from scipy import sparse
 
 from ..model.dataset import Dataset, cut_segments
 from ..model.effects import BOUND_SHARE, slow_time_constant
+from ..model.filters import convolve_columns
 from ..model.noise import robust_std
 from ..model.structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
@@ -198,8 +199,6 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     cost is linear in the samples. ``J`` may be a scipy sparse matrix. Also returns the plain
     Gauss-Newton errors sqrt(diag (J'J)^-1) (white residuals of unit variance) and each sample's
     share of their variances (``Influence``: n_samples x p, columns summing to one)."""
-    from scipy.signal import convolve  # here: scipy.signal takes seconds to import
-
     bread, free = fold_inverse(_dense(J.T @ J))
     bread = bread[:p]
     projected = np.asarray(J @ bread.T)
@@ -208,7 +207,7 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     u = projected[:n_samples] * f[:n_samples, None] + projected[n_samples:] * f[n_samples:, None]
     lags = np.arange(-min(bandwidth, n_samples - 1), min(bandwidth, n_samples - 1) + 1)
     bartlett = 1.0 - np.abs(lags) / (bandwidth + 1.0)
-    meat = u.T @ convolve(u, bartlett[:, None], mode="same")
+    meat = u.T @ convolve_columns(u, bartlett)
     unknown = np.where(free[:p], np.inf, 0.0)  # along a direction the data do not see at all
     hac, plain = (np.sqrt(np.clip(v, 0, None)) + unknown for v in (np.diag(meat), np.diag(bread[:, :p])))
     return hac, plain, shares, meat

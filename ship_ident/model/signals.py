@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .dataset import DataError, Dataset
+from .filters import savgol
 from .noise import SENSOR_RESOLUTION, robust_std
 
 DIFFERENTIATION_METHODS = ("savgol", "rts")
@@ -56,14 +57,12 @@ class Signals:
 
 
 def _savgol(values: np.ndarray, window: int, h: float, deriv: int) -> np.ndarray:
-    from scipy.signal import savgol_filter  # here: scipy.signal takes seconds to import
-
     if len(values) < window:
         window = len(values) if len(values) % 2 else len(values) - 1
     poly = min(4, window - 1)
     if window < 3:
         return np.zeros_like(values) if deriv else values.copy()
-    return savgol_filter(values, window, poly, deriv=deriv, delta=h, mode="interp")
+    return savgol(values, window, poly, deriv, h)
 
 
 def _rts_segment(psi, r, h, heading_noise, yaw_rate_noise, jerk_psd):

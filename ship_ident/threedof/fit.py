@@ -9,6 +9,7 @@ import numpy as np
 
 from ..estimators.lssvm import OLS
 from ..estimators.tlssvm import TLSSVM, TRUNCATION_RULES
+from ..model.filters import savgol
 from ..model.metrics import effective_sample_fraction, signal_metrics
 from .model import DOFS, Coefficients, Record, _regression_matrices, run_model
 
@@ -30,8 +31,6 @@ class Smoothed:
 
 def smooth(record: Record, window_time: float, trim: bool = True) -> Smoothed:
     """Cubic Savitzky-Golay fit over ``window_time`` (s); rows within half a window of the ends dropped."""
-    from scipy.signal import savgol_filter  # here: scipy.signal takes seconds to import
-
     h = record.sample_time
     window = max(5, int(round(window_time / h)) | 1)
     window = min(window, len(record) - (1 - len(record) % 2))
@@ -39,7 +38,7 @@ def smooth(record: Record, window_time: float, trim: bool = True) -> Smoothed:
     keep = slice(half, len(record) - half)
 
     def fit(x, deriv=0):
-        return savgol_filter(x, window, 3, deriv=deriv, delta=h, mode="interp")[keep]
+        return savgol(x, window, 3, deriv, h)[keep]
 
     return Smoothed(
         fit(record.surge),

@@ -14,26 +14,10 @@ import numpy as np
 DIRECT_LIMIT = 64  # kernels up to this many taps are applied directly, longer ones through the FFT
 
 
-def savgol_coefficients(window: int, polyorder: int, deriv: int = 0, h: float = 1.0) -> np.ndarray:
-    """Taps of the Savitzky-Golay filter: the ``deriv``-th derivative at the centre of the
-    least-squares polynomial of degree ``polyorder`` through ``window`` (odd) samples ``h`` s apart.
-
-    Parameters
-    ----------
-    window : int
-        Samples in the window (odd).
-    polyorder : int
-        Degree of the local polynomial (below ``window``).
-    deriv : int
-        Order of the derivative.
-    h : float
-        Sample time (s).
-
-    Returns
-    -------
-    numpy.ndarray
-        ``window`` taps, for convolution (the newest sample's tap first), in units of 1 / s^deriv.
-    """
+def _savgol_taps(window: int, polyorder: int, deriv: int, h: float) -> np.ndarray:
+    """Taps of the Savitzky-Golay filter (arguments as ``savgol``'s): the ``deriv``-th derivative at
+    the centre of the least-squares polynomial through the window, for convolution (the newest
+    sample's tap first), in units of 1 / s^deriv."""
     half = window // 2
     offsets = np.arange(half, -half - 1, -1, dtype=float)  # reversed: taps for convolution
     powers = offsets[None, :] ** np.arange(polyorder + 1)[:, None]
@@ -70,7 +54,7 @@ def savgol(values: np.ndarray, window: int, polyorder: int, deriv: int = 0, h: f
     """
     values = np.asarray(values, dtype=float)
     half = window // 2
-    out = np.convolve(values, savgol_coefficients(window, polyorder, deriv, h), mode="same")
+    out = np.convolve(values, _savgol_taps(window, polyorder, deriv, h), mode="same")
     positions = np.arange(window, dtype=float)
     for start, rows in ((0, slice(0, half)), (len(values) - window, slice(len(values) - half, len(values)))):
         polynomial = np.polyfit(positions, values[start : start + window], polyorder)

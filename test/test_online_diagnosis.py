@@ -195,7 +195,8 @@ def test_an_effect_the_gyro_noise_half_hides_is_named_when_it_removes_most_of_th
     effect that explains it removes 8 % of the total error, below the 15 % asked of the total, but
     most of the error above the floor (the floor's own sampling scatter keeps it from all). Named
     once its t holds, with a clear training gain; with a training gain of 5 % (as a candidate
-    fitting the noise would show) it is not."""
+    fitting the noise would show) not at t 4.6, only once its t is beyond doubt (measured 6.7 on
+    two minutes)."""
     names, sentences = {}, {}
     for gain in (0.12, 0.05):
         rng = np.random.default_rng(3)
@@ -212,7 +213,7 @@ def test_an_effect_the_gyro_noise_half_hides_is_named_when_it_removes_most_of_th
         pooled = last["candidates"][0]["pooled"]
         assert pooled["improvement_yaw_rate"] < 0.15 and pooled["excess_removed"] > 0.7  # measured 8 %, 78 %
     assert names[0.12][-1] and "of what lies above the noise floor" in sentences[0.12]
-    assert not any(names[0.05])
+    assert names[0.05][:2] == [False, True] and all(names[0.05][1:])
 
 
 def test_the_named_effect_changes_only_when_the_pooled_evidence_reverses():
@@ -245,9 +246,10 @@ def test_a_quick_boat_whose_yaw_damping_grows_with_the_cube_of_the_turn_rate_is_
     """A 15-minute trip of random rudder steps on a boat whose yaw damping has a cubic part (K
     0.33 1/s, T1 8.7 s, T2 0.86 s, T3 2.1 s, alpha 17.8 s^2/rad^2), diagnosed every minute with
     nomoto2 + rudder_offset: the tight turns that show the cubic damping come seldom, and a
-    window without them holds no evidence either way. Pooled since the start, cubic_yaw is named
-    (measured at 120 s, on 42 s of held-out data), never another effect; auto-add adds it after
-    three diagnoses and the next diagnosis' held-out error is at the noise floor."""
+    window without them holds no evidence either way, and the gyro's noise holds the pooled error
+    at 1.0-1.1 times the floor. Pooled since the start, cubic_yaw is named by its t (measured at
+    360 s, on 4.7 min of held-out data: 10 % of the error at t 8), never another effect; auto-add
+    adds it after three diagnoses and the next diagnosis' held-out error is at the noise floor."""
     boat = Vessel(
         "cubic damping",
         "a quick boat whose yaw damping grows with the cube of the turn rate",
@@ -259,7 +261,7 @@ def test_a_quick_boat_whose_yaw_damping_grows_with_the_cube_of_the_turn_rate_is_
     done = [d for _, d in diagnosed(sim, config) if d["status"] == "done"]
     named = [d for d in done if d["verdict"] == "missing_effect"]
     print([(d["stamp"], d["verdict"], d["verdict_sentence"][:80]) for d in done])
-    assert named and named[0]["stamp"] <= 600.0  # measured: 120 s
+    assert named and named[0]["stamp"] <= 600.0  # measured: 360 s
     assert {d["candidates"][0]["effect"] for d in named} == {"cubic_yaw"}
     assert "of held-out data since the start" in named[0]["verdict_sentence"]
     added = next(k for k, d in enumerate(done) if d.get("auto_add", {}).get("action") == "added")

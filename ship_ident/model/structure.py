@@ -72,9 +72,7 @@ ACCELERATION_MODELS: dict[str, tuple[Parameter, ...]] = {
     "nomoto2": (
         Parameter("b0", "1/s^2", "rudder's yaw acceleration per rudder angle (K / (T1 + T2))", 0.1, 1e-8, 1e3),
         Parameter("b1", "1/s", "rudder's yaw acceleration per rudder rate (K T3 / (T1 + T2))", 0.0, 0.0, 1e3),
-        Parameter(
-            "m2", "s", "fast pole's time (T1 T2 / (T1 + T2); as T2, no hull answers faster than 10 ms)", 0.1, 0.01, 1e3
-        ),
+        Parameter("m2", "s", "fast pole's time (T1 T2 / (T1 + T2))", 0.1, 1e-3, 1e3),
         Parameter("a1", "1/s", "linear yaw damping (1 / (T1 + T2); below 0: course-unstable)", 0.05, -10.0, 100.0),
     ),
 }

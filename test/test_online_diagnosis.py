@@ -246,10 +246,9 @@ def test_a_quick_boat_whose_yaw_damping_grows_with_the_cube_of_the_turn_rate_is_
     """A 15-minute trip of random rudder steps on a boat whose yaw damping has a cubic part (K
     0.33 1/s, T1 8.7 s, T2 0.86 s, T3 2.1 s, alpha 17.8 s^2/rad^2), diagnosed every minute with
     nomoto2 + rudder_offset: the tight turns that show the cubic damping come seldom, and a
-    window without them holds no evidence either way, and the gyro's noise holds the pooled error
-    at 1.0-1.1 times the floor. Pooled since the start, cubic_yaw is named by its t (measured at
-    360 s, on 4.7 min of held-out data: 10 % of the error at t 8), never another effect; auto-add
-    adds it after three diagnoses and the next diagnosis' held-out error is at the noise floor."""
+    window without them holds no evidence either way. Pooled since the start, cubic_yaw is named
+    (measured at 120 s, on 42 s of held-out data), never another effect; auto-add adds it after
+    three diagnoses and the next diagnosis' held-out error is at the noise floor."""
     boat = Vessel(
         "cubic damping",
         "a quick boat whose yaw damping grows with the cube of the turn rate",
@@ -261,7 +260,7 @@ def test_a_quick_boat_whose_yaw_damping_grows_with_the_cube_of_the_turn_rate_is_
     done = [d for _, d in diagnosed(sim, config) if d["status"] == "done"]
     named = [d for d in done if d["verdict"] == "missing_effect"]
     print([(d["stamp"], d["verdict"], d["verdict_sentence"][:80]) for d in done])
-    assert named and named[0]["stamp"] <= 600.0  # measured: 360 s
+    assert named and named[0]["stamp"] <= 600.0  # measured: 120 s
     assert {d["candidates"][0]["effect"] for d in named} == {"cubic_yaw"}
     assert "of held-out data since the start" in named[0]["verdict_sentence"]
     added = next(k for k, d in enumerate(done) if d.get("auto_add", {}).get("action") == "added")

@@ -354,10 +354,10 @@ class PooledEvidence:
         ``MOST_OF_THE_ERROR`` of the error above the noise floor with a clear gain on the training
         free runs (``CLEAR_TRAINING_GAIN``): ``diagnose``'s clear case, on the part of the error a
         model can explain; or ``SMALL_SHARE`` of it with a t beyond doubt (``CERTAIN_T``). A
-        quick boat's cubic damping acts in its seldom tight turns: over 15 minutes it removed 7-12 %
-        of a pooled error 1.0-1.1 times the floor at t 8-11, and the share above a floor known only
-        to a few percent swung between none and all of it; t grows with the minutes pooled, noise's
-        does not."""
+        quick boat's cubic damping acts in its seldom tight turns: fitted with its base model
+        converged, over 15 minutes it removed 7-12 % of a pooled error 1.0-1.1 times the floor at t
+        8-11, and the share above a floor known only to a few percent swung between none and all of
+        it; t grows with the minutes pooled, noise's does not."""
         return bool(
             self.improvement(name) >= MIN_IMPROVEMENT
             or (self.excess_removed(name) >= MOST_OF_THE_ERROR and self.training_gain(name) >= CLEAR_TRAINING_GAIN)

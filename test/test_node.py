@@ -59,15 +59,16 @@ REFIT_PERIOD = 5.0  # s, the node's default
 PLAY_LEAD = 2 * REFIT_PERIOD + REFIT_PERIOD / TICKS_PER_REFIT
 
 
-def played_to_the_end(env, domain_id, path, rate: float, while_running=None, lead=PLAY_LEAD):
-    """The node (defaults) and a listener while ``path`` plays at up to ``rate`` x real time, until
+def played_to_the_end(env, domain_id, path, rate: float, while_running=None, lead=PLAY_LEAD, parameters=()):
+    """The node and a listener while ``path`` plays at up to ``rate`` x real time, until
     the node has published its refit of the bag's end (one a refit period from it at least): paced
     by the node's progress, not by the machine keeping the play rate (/clock never runs more than
-    ``lead`` past the node's newest refit, ``Listener.pace_by_node``). ``while_running(listener)`` runs then, the node
+    ``lead`` past the node's newest refit, ``Listener.pace_by_node``; the node's ``parameters`` as
+    ``name:=value``). ``while_running(listener)`` runs then, the node
     still up; it shuts down cleanly after. The listener."""
     samples = read_samples(path)
     end = samples[-1].time
-    node = node_process(env)
+    node = node_process(env, *parameters)
     listener = Listener(domain_id)
     try:
         player = Player(listener.node)
@@ -113,7 +114,11 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
     sample after the first estimate, close to the measurement."""
     path, truth = bag
     late = []
-    listener = played_to_the_end(env, domain_id, path, 10.0, lambda _: late.extend(late_parameters(domain_id)))
+    # at 10x a refit that holds the node's executor for a second of wall time (a loaded machine) lets
+    # 100 samples a topic queue: the input QoS depth holds 100 s of them, so none is dropped
+    listener = played_to_the_end(
+        env, domain_id, path, 10.0, lambda _: late.extend(late_parameters(domain_id)), parameters=("qos_depth:=1000",)
+    )
     final = final_estimate(listener)
     assert final["stamp"] > 280.0 and final["status"] in ("OK", "WARN"), final["conditions"]
     assert final["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)

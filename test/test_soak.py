@@ -96,8 +96,10 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
         "refits": len(records),
         "new_estimates": int(len(latency)),
         "overran": overran,
-        # the timer ticks TICKS_PER_REFIT times per period: a refit one tick late still keeps the schedule
-        "period_kept_share": float(np.mean(np.abs(intervals - REFIT_PERIOD) <= REFIT_PERIOD / TICKS_PER_REFIT + 0.05)),
+        # the timer ticks TICKS_PER_REFIT times per period: a refit one tick late still keeps the schedule,
+        # and one brought forward (a change found between refits is refitted at once, and followed at a
+        # fifth of the period) keeps it too
+        "period_kept_share": float(np.mean(intervals <= REFIT_PERIOD + REFIT_PERIOD / TICKS_PER_REFIT + 0.05)),
         "refit_ms_p50_p95_p99_max": [round(1000 * v, 1) for v in np.percentile(latency, [50, 95, 99, 100])],
     }
     print("\nsoak figures:", figures)

@@ -23,6 +23,7 @@ from ship_ident.diagnosis.diagnose import (
     judge_across_manoeuvres,
     no_worse,
     on_long_runs,
+    parameter_warnings,
     split,
     windows,
 )
@@ -522,3 +523,21 @@ def test_a_slow_ship_rudder_offset_whose_search_crawled_is_refined_on_long_runs(
         return free_run(fit.structure, parameters, held_out).fit["rmse_heading"]
 
     assert held_out_error(refined.parameters) < 0.5 * held_out_error(fit.parameters)
+
+
+def test_a_linear_damping_near_zero_is_determined_against_the_damping_of_the_turns_sailed():
+    """A hull whose cross-flow drag holds its turns (d_q 1.2 1/rad at 0.03 rad/s RMS: 0.036 1/s)
+    while its linear damping is 0.002 +- 0.006 1/s: the sign of a1 is unknown, the damping of the
+    turns is not, and no warning is raised; with no cross-flow drag (d_q 0.1: 0.003 1/s) the same
+    a1 is poorly determined."""
+    structure = Structure("nomoto1", ("quadratic_yaw",))
+    std_errors = {"b": 0.0005, "a1": 0.006, "d_q": 0.05}
+
+    def warned(d_q):
+        parameters = {"b": 0.01, "a1": 0.002, "d_q": d_q}
+        info = {"excitation": {"yaw_rate_std": 0.03}}
+        estimate = Estimate(structure, DEFAULT_METHOD, parameters, std_errors, {}, 100, info=info)
+        return [w["parameter"] for w in parameter_warnings(estimate)]
+
+    assert warned(1.2) == []
+    assert warned(0.1) == ["a1"]

@@ -162,6 +162,37 @@ def test_a_tanker_whose_rudder_stall_runs_to_its_bound_is_recommended_the_cubic_
 
 
 @pytest.mark.slow
+def test_a_tanker_whose_linear_damping_is_near_zero_is_recommended_the_cubic_damping_in_acceleration_form():
+    """A KVLCC2-like hull with weak linear yaw damping (N_r 0.73 times KVLCC2's): cubic_yaw in
+    Nomoto form ranks first on the held-out zigzags and turning circle, with K, T1 and alpha along a
+    free direction (the form divides by the linear damping; alpha +- more than its value). The same
+    model in acceleration form (course_instability, a1 of either sign) on nomoto1 is determined, its
+    linear damping known against the damping of the turns sailed: it is recommended, and still
+    halves the held-out heading error."""
+    hull = mmg.random_hull(np.random.default_rng(758252822))
+    training, held_out = mmg.hull_recordings(hull, 758252822)
+    base = _fit(Structure("nomoto2"), training, DEFAULT_METHOD)
+    window = held_out_window(base.parameters, max(b - a for a, b in held_out.segments) * held_out.sample_time)
+    held_windows, training_windows = windows(held_out, window), windows(training, window)
+    run = free_run(base.structure, base.parameters, held_windows)
+    training_run = free_run(base.structure, base.parameters, training_windows)
+    context = residual_context(base.structure, base.parameters, training)
+    candidates = []
+    for effect in ("cubic_yaw", "course_instability"):
+        fit = _fit(Structure("nomoto2", (effect,)), training, DEFAULT_METHOD, base.parameters)
+        evidence = EFFECTS[effect].evidence(context)
+        candidates.append(judge(effect, evidence, held_windows, run, fit, training_windows, training_run))
+    cubic = candidates[0]
+    assert cubic.significant and "alpha" in undetermined(cubic.estimate)
+    views = (base, training, held_windows, run, training_windows, training_run, DEFAULT_METHOD)
+    recommend_determined(candidates, *views)
+    first = candidates[0]
+    assert first.effect == "course_instability" and first.estimate.structure.model == "nomoto1"
+    assert first.significant and undetermined(first.estimate) == [] and first.improvement_heading >= 0.5
+    assert first.preferred_over["effect"] == "cubic_yaw"
+
+
+@pytest.mark.slow
 def test_a_rudder_stall_that_shows_in_the_held_out_turns_is_missing():
     """A course-stable KVLCC2-like hull (linear yaw damping 1.4 times KVLCC2's, a large rudder): on the
     held-out zigzags and turning circle rudder_stall removes half the heading error, and its

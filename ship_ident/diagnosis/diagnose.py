@@ -692,8 +692,38 @@ def residual_tests(held_out: Dataset, run: FreeRun, noise_yaw_rate: float | None
     }
 
 
+def damping_rate(estimate: Estimate) -> float:
+    """The yaw damping per unit inertia (1/s) of ``estimate``'s acceleration form at its RMS turn rate:
+    ``|a1|`` plus each nonlinear damping term's rate there (``|c| r^(p-1)`` for a term ``c r^p``).
+
+    The linear damping ``a1`` passes through zero between course-stable and course-unstable hulls, and
+    near zero a cross-flow or cubic damping holds the turns: its standard error is weighed against the
+    damping the hull has at the turn rates it sails, not against ``a1`` itself. Where ``a1`` is within
+    its error of zero, the sign of the linear damping is not known, but the turns it damps are.
+
+    Parameters
+    ----------
+    estimate : Estimate
+        A fit in the acceleration form (with ``a1``).
+
+    Returns
+    -------
+    float
+        The damping rate (1/s).
+    """
+    turn_rate = estimate.info.get("excitation", {}).get("yaw_rate_std", 0.0)
+    rate = abs(estimate.parameters["a1"])
+    for effect in estimate.structure.effects:
+        for term in effect.forcing_terms(estimate.parameters):
+            power = term.r_power + term.abs_power
+            if term.r_power >= 1 and term.harmonic == 0 and power > 1:
+                rate += abs(term.coefficient) * turn_rate ** (power - 1)
+    return rate
+
+
 def parameter_warnings(estimate: Estimate) -> list[dict]:
-    """The estimate's parameters on a physical bound or poorly determined.
+    """The estimate's parameters on a physical bound or poorly determined (a standard error larger
+    than the value; for the linear damping ``a1``, larger than the hull's ``damping_rate``).
 
     Parameters
     ----------
@@ -731,7 +761,7 @@ def parameter_warnings(estimate: Estimate) -> list[dict]:
                     "message": f"{name} is pinned at its {side} bound {bound:g} {p.unit}{hint}",
                 }
             )
-        if not pinned and std > abs(value):
+        if not pinned and std > (damping_rate(estimate) if name == "a1" else abs(value)):
             out.append(
                 {
                     "parameter": name,
@@ -1461,11 +1491,13 @@ def recommend_determined(
     undetermined (``undetermined``: a stall coefficient pinned at its bound, a speed exponent or a
     cubic damping whose error exceeds its value), the candidates the held-out data cannot tell
     from it (``mark_near_equivalents``: within ``EQUIVALENT_MARGIN`` of its improvement and not
-    significantly worse) are tried in their rank order, each in its own first-order view: the first
-    of them whose parameters are all determined, and that is significant wherever the first is, is
-    ranked first (``preferred_over`` names the one it displaced). Between two models that predict
-    the other manoeuvres alike, the one the data determine is the one to publish. The verdict does
-    not change: only a significant candidate replaces a significant one.
+    significantly worse) and those whose structure holds its model in another parametrisation
+    (course_instability's acceleration form holds cubic_yaw's, which divides by a linear damping
+    that may be near zero) are tried, each in its own first-order view: of those whose parameters
+    are all determined, and that are significant wherever the first is, the one removing most of
+    the held-out error is ranked first (``preferred_over`` names the one it displaced). Between two
+    models that predict the other manoeuvres alike, the one the data determine is the one to
+    publish. The verdict does not change: only a significant candidate replaces a significant one.
 
     Parameters
     ----------
@@ -1487,16 +1519,22 @@ def recommend_determined(
     if first.estimate is None or not undetermined(first.estimate):
         return
     mark_near_equivalents(candidates, held_out)
-    group, first.near_equivalent = first.near_equivalent, []
+    # an effect whose structure holds the first's in another parametrisation (course_instability's
+    # acceleration form holds cubic_yaw's model) is the same model, whatever the held-out scatter says
+    holders = [c.effect for c in candidates if first.effect in EFFECTS[c.effect].replaces and c.estimate is not None]
+    group, first.near_equivalent = list(dict.fromkeys(first.near_equivalent + holders)), []
+    determined = []
     for name in group:
         index = next(i for i, c in enumerate(candidates) if c.effect == name)
         view = first_order_view(candidates[index], *views)
         if view.estimate is None or undetermined(view.estimate) or (first.significant and not view.significant):
             continue
-        view.preferred_over = {"effect": first.effect, "undetermined": undetermined(first.estimate)}
-        del candidates[index]
-        candidates.insert(0, view)
-        return
+        determined.append(view)
+    if determined:
+        best = max(determined, key=lambda view: view.improvement)
+        best.preferred_over = {"effect": first.effect, "undetermined": undetermined(first.estimate)}
+        candidates.remove(next(c for c in candidates if c.effect == best.effect))
+        candidates.insert(0, best)
 
 
 def recommendation_sentence(candidate: Candidate) -> str:

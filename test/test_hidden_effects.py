@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from ship_ident.bench.hidden_effects import best_base_errors, draw_case, run_case, true_improvement
-from ship_ident.diagnosis.diagnose import diagnose, free_run, split, windows
+from ship_ident.diagnosis.damping_law import damping_law
+from ship_ident.diagnosis.diagnose import DEFAULT_METHOD, diagnose, free_run, split, windows
+from ship_ident.estimators import make_estimator
 from ship_ident.model.simulator import Vessel, simulate
 from ship_ident.model.structure import Structure
 
@@ -149,6 +151,15 @@ def test_a_course_unstable_usv_keeps_its_name_beside_the_quadratic_law():
     assert first.effect == "course_instability" and "quadratic_yaw" in first.near_equivalent
     assert first.damping_law.laws == ("course_instability",)
     assert first.damping_law.linear_damping == pytest.approx(truth["a1"], rel=0.1)
+
+
+def test_a_usv_modelled_with_its_cross_flow_drag_has_its_damping_law_read_with_the_drag_in_force():
+    """The damping-law fit holds both laws: on a model that already holds the quadratic one (a crew
+    added it) it adds only the cubic one, and reads the same USV's law as quadratic."""
+    _, _, sim = draw_case(861563203, ("quadratic_yaw",))
+    estimate = make_estimator(DEFAULT_METHOD).fit(Structure("nomoto2", ("quadratic_yaw",)), sim.dataset)
+    law = damping_law(estimate, sim.dataset, [estimate.parameters], DEFAULT_METHOD)
+    assert law is not None and law.laws == ("quadratic_yaw",)
 
 
 def test_a_rudder_delay_half_the_time_constant_on_a_usv_is_found_where_the_fit_without_it_sees_no_hull():

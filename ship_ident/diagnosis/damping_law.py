@@ -97,7 +97,9 @@ def damping_law(estimate: Estimate, recorded: Dataset, starts: list[dict], metho
     DampingLaw or None
         None when the fit fails.
     """
-    joint = estimate.structure.adding(QUADRATIC).adding(UNSTABLE)
+    joint = estimate.structure
+    for law in (QUADRATIC, UNSTABLE):  # a law already in the model stays, once
+        joint = joint if law in joint.effect_names else joint.adding(law)
     points = [
         {name: value for name, value in joint.neutral_effect_start(p).items() if name in joint.parameter_names}
         for p in (*starts, estimate.parameters)

@@ -340,3 +340,24 @@ def test_a_tanker_whose_first_short_window_fit_missed_widely_is_judged_on_every_
     assert squares[0] > 20 * squares[1]  # the first slice's squared error outweighs a later one's 20 times
     assert "missing_effect" in verdicts[:9]
     assert result["candidates"][0]["effect"] == "speed_dependence"
+
+
+def test_a_tanker_whose_candidate_ran_wild_in_one_held_out_minute_is_still_named():
+    """A candidate fitted on a few minutes extrapolates far off in one held-out minute (three times
+    the model's error there) and removes half of the error in each of the eight others. Its pooled
+    share is a geometric mean of the minutes' error ratios, in which running at three times the
+    model's error weighs as running at a third of it: named within the nine minutes. (The arithmetic
+    mean of the ratios, which that one minute dominates, removes none.)"""
+    rng = np.random.default_rng(5)
+    diagnosis, config = OnlineDiagnosis(), OnlineConfig(effects=())
+    plan = [(swell(20.0, 3.0), {"quadratic_yaw": swell(20.0, 1.5)})] * 4
+    plan += [(swell(20.0, 3.0), {"quadratic_yaw": swell(20.0, 9.0)})]
+    plan += [(swell(20.0, 3.0), {"quadratic_yaw": swell(20.0, 1.5)})] * 4
+    ratios = []
+    for k, (missed, left) in enumerate(plan):
+        result = drawn_diagnosis(60.0 * (k + 2), missed, left, rng)
+        squares = result["held_out_slice"]["squares"]
+        ratios.append(squares[1] / squares[0])
+        diagnosis.finish(result, config)
+    assert np.mean(ratios) > 1.0  # averaged, the wild minute outweighs the eight
+    assert result["verdict"] == "missing_effect" and result["candidates"][0]["effect"] == "quadratic_yaw"

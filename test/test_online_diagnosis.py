@@ -361,3 +361,29 @@ def test_a_tanker_whose_candidate_ran_wild_in_one_held_out_minute_is_still_named
         diagnosis.finish(result, config)
     assert np.mean(ratios) > 1.0  # averaged, the wild minute outweighs the eight
     assert result["verdict"] == "missing_effect" and result["candidates"][0]["effect"] == "quadratic_yaw"
+
+
+def test_a_tanker_whose_stall_fit_runs_to_its_bound_is_named_by_the_determined_drag_that_removes_more():
+    """A tanker's first two minutes: a rudder stall pinned at its bound removes 30 % of the pooled error
+    at t 3.4; a cross-flow drag the data determine removes 46 % at t 2.3, not significant alone but not
+    to be told from the stall: the group is named with the drag leading it. A determined candidate
+    removing less than the stall, and not significant, does not lead."""
+    samples, floor = 600, 0.01
+    model = samples * (3.0 * floor) ** 2
+
+    def pool(drag_share: float) -> PooledEvidence:
+        squares = [model, model * 0.7**2, model * (1.0 - drag_share) ** 2]
+        variance = np.zeros((3, 3))
+        variance[0, 1] = variance[1, 0] = ((squares[0] - squares[1]) / 3.4) ** 2
+        variance[0, 2] = variance[2, 0] = ((squares[0] - squares[2]) / 2.3) ** 2
+        variance[1, 2] = variance[2, 1] = variance[0, 2]
+        evidence = PooledEvidence(["model", "rudder_stall", "quadratic_yaw"])
+        piece = {"start": 0.0, "samples": samples, "seconds": 60.0, "squares": squares}
+        piece.update(pair_variance=variance.tolist(), training_gain=[0.0, 0.1 * samples, 0.4 * samples])
+        evidence.add(dict(piece, noise_squares=samples * floor**2))
+        return evidence
+
+    more, less = pool(0.46), pool(0.2)
+    assert more.significant("rudder_stall") and not more.significant("quadratic_yaw")
+    assert OnlineDiagnosis._determined_lead(more, "rudder_stall", {"rudder_stall"}) == "quadratic_yaw"
+    assert OnlineDiagnosis._determined_lead(less, "rudder_stall", {"rudder_stall"}) == "rudder_stall"

@@ -131,14 +131,13 @@ def test_a_slow_tanker_whose_manoeuvres_show_one_pole_is_recommended_on_nomoto1(
     assert "the data do not determine a second pole (m2 " in first_order_sentence(view)
 
 
-@pytest.mark.slow
-def test_a_tanker_whose_rudder_stall_runs_to_its_bound_is_recommended_the_cubic_damping_the_data_determine():
-    """A KVLCC2-like hull (linear yaw damping and nonlinear hull terms 1.4-1.6 times KVLCC2's):
-    rudder_stall ranks first on the held-out zigzags and turning circle with its coefficient pinned at
-    the 0.9 bound; cubic_yaw removes about as much and the data determine its parameters: it is
-    recommended, and says which it was ranked before and why, with the verdict unchanged."""
-    hull = mmg.random_hull(np.random.default_rng(109490502))
-    training, held_out = mmg.hull_recordings(hull, 109490502)
+def judged_candidates(seed: int, effects: tuple) -> tuple[list, tuple]:
+    """An MMG hull drawn from ``seed``, fitted on its random steps: each of ``effects`` added to its
+    nomoto2 fit and judged on its held-out zigzags and turning circle, in that order, and the views
+    ``recommend_determined`` takes (the model, the training data, the held-out and training windows
+    with the model's free runs on them, the method)."""
+    hull = mmg.random_hull(np.random.default_rng(seed))
+    training, held_out = mmg.hull_recordings(hull, seed)
     base = _fit(Structure("nomoto2"), training, DEFAULT_METHOD)
     window = held_out_window(base.parameters, max(b - a for a, b in held_out.segments) * held_out.sample_time)
     held_windows, training_windows = windows(held_out, window), windows(training, window)
@@ -146,13 +145,22 @@ def test_a_tanker_whose_rudder_stall_runs_to_its_bound_is_recommended_the_cubic_
     training_run = free_run(base.structure, base.parameters, training_windows)
     context = residual_context(base.structure, base.parameters, training)
     candidates = []
-    for effect in ("rudder_stall", "cubic_yaw"):
+    for effect in effects:
         fit = _fit(Structure("nomoto2", (effect,)), training, DEFAULT_METHOD, base.parameters)
         evidence = EFFECTS[effect].evidence(context)
         candidates.append(judge(effect, evidence, held_windows, run, fit, training_windows, training_run))
+    return candidates, (base, training, held_windows, run, training_windows, training_run, DEFAULT_METHOD)
+
+
+@pytest.mark.slow
+def test_a_tanker_whose_rudder_stall_runs_to_its_bound_is_recommended_the_cubic_damping_the_data_determine():
+    """A KVLCC2-like hull (linear yaw damping and nonlinear hull terms 1.4-1.6 times KVLCC2's):
+    rudder_stall ranks first on the held-out zigzags and turning circle with its coefficient pinned at
+    the 0.9 bound; cubic_yaw removes about as much and the data determine its parameters: it is
+    recommended, and says which it was ranked before and why, with the verdict unchanged."""
+    candidates, views = judged_candidates(109490502, ("rudder_stall", "cubic_yaw"))
     stall = candidates[0]
     assert stall.significant and "c_stall" in undetermined(stall.estimate)
-    views = (base, training, held_windows, run, training_windows, training_run, DEFAULT_METHOD)
     recommend_determined(candidates, *views)
     first = candidates[0]
     assert first.effect == "cubic_yaw" and first.significant and undetermined(first.estimate) == []
@@ -169,22 +177,9 @@ def test_a_tanker_whose_linear_damping_is_near_zero_is_recommended_the_cubic_dam
     model in acceleration form (course_instability, a1 of either sign) on nomoto1 is determined, its
     linear damping known against the damping of the turns sailed: it is recommended, and still
     halves the held-out heading error."""
-    hull = mmg.random_hull(np.random.default_rng(758252822))
-    training, held_out = mmg.hull_recordings(hull, 758252822)
-    base = _fit(Structure("nomoto2"), training, DEFAULT_METHOD)
-    window = held_out_window(base.parameters, max(b - a for a, b in held_out.segments) * held_out.sample_time)
-    held_windows, training_windows = windows(held_out, window), windows(training, window)
-    run = free_run(base.structure, base.parameters, held_windows)
-    training_run = free_run(base.structure, base.parameters, training_windows)
-    context = residual_context(base.structure, base.parameters, training)
-    candidates = []
-    for effect in ("cubic_yaw", "course_instability"):
-        fit = _fit(Structure("nomoto2", (effect,)), training, DEFAULT_METHOD, base.parameters)
-        evidence = EFFECTS[effect].evidence(context)
-        candidates.append(judge(effect, evidence, held_windows, run, fit, training_windows, training_run))
+    candidates, views = judged_candidates(758252822, ("cubic_yaw", "course_instability"))
     cubic = candidates[0]
     assert cubic.significant and "alpha" in undetermined(cubic.estimate)
-    views = (base, training, held_windows, run, training_windows, training_run, DEFAULT_METHOD)
     recommend_determined(candidates, *views)
     first = candidates[0]
     assert first.effect == "course_instability" and first.estimate.structure.model == "nomoto1"

@@ -722,8 +722,10 @@ def damping_rate(estimate: Estimate) -> float:
 
 
 def parameter_warnings(estimate: Estimate) -> list[dict]:
-    """The estimate's parameters on a physical bound or poorly determined (a standard error larger
-    than the value; for the linear damping ``a1``, larger than the hull's ``damping_rate``).
+    """The estimate's parameters on a physical bound or poorly determined.
+
+    Poorly determined: a standard error larger than the value; for the linear damping ``a1``, larger
+    than the hull's ``damping_rate``.
 
     Parameters
     ----------

@@ -402,12 +402,12 @@ class OutputError(Estimator):
         regression missed the time scale (MISSED_TIME_SCALE_FLAGS), the search also explores
         (``_refine``); a given start is a converged estimate of a nearby window, and a sound regression
         start needs no exploring (the refit stays as quick as it was). A ``warm`` fit whose first start
-        holds every parameter of the model searches from that start and its conservative variant in
-        place of the regression's: the equation-error regression (about a sixth of an online
-        refit's time) is not solved. On the online refits measured (bag replays of a quick USV, an
-        hour of a mixed manoeuvre) the polished warm start won every comparison with the regression's
-        starts; a warm search that gets stuck or does not converge is followed by a cold fit, which
-        starts from the regression (``online.window_fit``).
+        holds every parameter of the model searches from that start alone, polished: the equation-error
+        regression (about a sixth of an online refit's time) is not solved, and neither it nor its
+        conservative variant is judged. On the online refits measured (bag replays of a quick USV, an
+        hour of a mixed manoeuvre) the polished warm start won every comparison with them; a warm
+        search that gets stuck or does not converge is followed by a cold fit, which starts from the
+        regression (``online.window_fit``).
 
         Parameters
         ----------
@@ -428,7 +428,8 @@ class OutputError(Estimator):
             ``info`` (cost, cost ratio, Gauss-Newton errors, influence).
         """
         needed = (*structure.free_names, *structure.fixed_names)
-        if warm and starts and all(n in starts[0] for n in needed):
+        warm = warm and bool(starts) and all(n in starts[0] for n in needed)
+        if warm:
             first = Estimate(structure, "warm start", dict(starts[0]), {}, {}, dataset.n_samples)
         else:
             first = self.start.fit(structure, dataset)
@@ -436,7 +437,7 @@ class OutputError(Estimator):
         if not starts and structure.effects:
             bare = self.start.fit(Structure(structure.model, ()), dataset).parameters
             starts = (structure.neutral_effect_start(bare),)
-        estimate = self._refine(structure, dataset, first, tuple(starts), explore)
+        estimate = self._refine(structure, dataset, first, tuple(starts), explore, warm=warm)
         used = estimate.info.get("shooting_s", math.inf)
         if self.shooting_length(dataset, estimate.parameters) > RESHOOT_RATIO * used:
             # the starts missed the hull's time scale, and its shooting intervals with it (a ship's
@@ -683,14 +684,16 @@ class OutputError(Estimator):
         explore: bool,
         held: tuple = (),
         weighted_at: dict | None = None,
+        warm: bool = False,
     ) -> Estimate:
         """Minimise the free-run error from ``first`` (the regression fit, and its conservative
         variant) or from any of ``starts``, whichever simulates closest to the data; ``explore``:
         also from a range of time constants, every start's gain, rudder offset and states polished
         first (a cold fit; a warm one, from an estimate of a nearby window, needs neither); the
         parameters named in ``held`` stay at ``first``'s values; ``weighted_at`` (parameters): every
-        start weighed with the noise model and Huber weights there (``fit_held``)."""
-        return self._estimate(*self._search(structure, dataset, first, starts, explore, held, weighted_at))
+        start weighed with the noise model and Huber weights there (``fit_held``); ``warm``:
+        ``starts[0]`` is the model's estimate on a nearby window, searched from alone (polished)."""
+        return self._estimate(*self._search(structure, dataset, first, starts, explore, held, weighted_at, warm))
 
     def _search(
         self,
@@ -701,6 +704,7 @@ class OutputError(Estimator):
         explore: bool,
         held: tuple,
         weighted_at: dict | None,
+        warm: bool = False,
     ) -> tuple[ShootingProblem, Estimate, LeastSquaresResult, dict]:
         """``_refine``'s search: its shooting problem, ``first``, the search's end and its facts."""
         names = structure.free_names
@@ -711,7 +715,7 @@ class OutputError(Estimator):
         intervals = shooting_intervals(dataset.segments, int(round(shooting_s / dataset.sample_time)))
         problem = ShootingProblem(structure, dataset, intervals, names, {n: params0[n] for n in structure.fixed_names})
         search = _Search(problem, lower, upper, structure.yaw_rate_bias(params0))
-        x0 = self._best_start(search, first, params0, starts, explore, weighted_at)
+        x0 = self._best_start(search, first, params0, starts, explore, weighted_at, warm)
         if weighted_at is not None:  # the Huber weights of that point, its states from the data
             at = np.concatenate([[structure.clip_to_bounds(weighted_at)[n] for n in names], search.states0.ravel()])
             search.robust = huber_weights(search.residual(at), dataset.n_samples)
@@ -742,16 +746,18 @@ class OutputError(Estimator):
         starts: tuple,
         explore: bool,
         weighted_at: dict | None,
+        warm: bool = False,
     ) -> np.ndarray:
         """The unknowns of the start that simulates closest to the data (``_refine``), its
         weighting set as the search's; each start judged with the noise model at its own parameters
         (-2 log-likelihood: one fixed at a regression start that missed the time scale favours
         starts near it) and with the unknowns its free run is linear in (gain, rudder offset,
-        interval states) fitted."""
+        interval states) fitted; a ``warm`` fit judges ``starts`` alone (``fit``)."""
         problem, structure, dataset = search.problem, search.problem.structure, search.problem.dataset
         names, p, h = problem.names, problem.n_params, dataset.sample_time
         s_psi, s_r = dataset.noise_std("heading"), dataset.noise_std("yaw_rate")
-        guesses = self._starts(structure, names, np.array([params0[n] for n in names]), params0, explore) + [
+        x0 = np.array([params0[n] for n in names])
+        guesses = ([] if warm else self._starts(structure, names, x0, params0, explore)) + [
             np.array([structure.clip_to_bounds(dict(params0, **s))[n] for n in names]) for s in starts
         ]
         points = [np.clip(np.concatenate([g, search.states0.ravel()]), search.lo, search.hi) for g in guesses]

@@ -387,3 +387,28 @@ def test_a_tanker_whose_stall_fit_runs_to_its_bound_is_named_by_the_determined_d
     assert more.significant("rudder_stall") and not more.significant("quadratic_yaw")
     assert OnlineDiagnosis._determined_lead(more, "rudder_stall", {"rudder_stall"}) == "quadratic_yaw"
     assert OnlineDiagnosis._determined_lead(less, "rudder_stall", {"rudder_stall"}) == "rudder_stall"
+
+
+def test_a_quick_boat_whose_cubic_damping_refits_a_little_worse_than_the_quadratic_law_is_named_by_its_law():
+    """A USV's cubic yaw damping: refitted apart, the quadratic law removes a little more of the held-out
+    error than the cubic one (their searches, t beyond 3 between them), while the fits holding both
+    laws put the damping's growth in the cubic term. The pool names the cubic law, with the quadratic
+    one beside it, and keeps it: the quadratic law's lower error is no reversal. Without the law fits
+    the quadratic law is named."""
+    config = OnlineConfig(effects=())
+    names = {}
+    for laws in (["cubic_yaw"], []):
+        rng = np.random.default_rng(6)
+        diagnosis = OnlineDiagnosis()
+        named = []
+        for k in range(8):
+            left = {"quadratic_yaw": swell(20.0, 0.6), "cubic_yaw": swell(20.0, 0.75)}
+            result = dict(drawn_diagnosis(60.0 * (k + 2), swell(20.0, 2.0), left, rng), damping_laws=laws)
+            diagnosis.finish(result, config)
+            named.append(result["candidates"][0]["effect"] if result["verdict"] == "missing_effect" else None)
+        pool = diagnosis._pool
+        assert pool.significant("cubic_yaw") and pool.t_statistic("cubic_yaw", "quadratic_yaw") > 3
+        names[bool(laws)] = named
+        if laws:
+            assert "quadratic_yaw" in result["near_equivalent"]
+    assert set(names[True]) == {"cubic_yaw"} and set(names[False]) == {"quadratic_yaw"}

@@ -213,6 +213,8 @@ class Diagnosis:
     before_run: FreeRun | None = None
     evidences: dict = field(default_factory=dict)
     training_windows: Dataset | None = None  # the training part cut into the held-out windows' length
+    # the law a fit holding both damping laws shows (``rank_damping_laws``), whether or not it reordered
+    damping_law: DampingLaw | None = None
 
     @property
     def structure(self) -> Structure:
@@ -1769,6 +1771,7 @@ def diagnose(
         before_run=before_run,
         evidences=evidences,
         training_windows=fitted_windows,
+        damping_law=law,
     )
 
 

@@ -8,10 +8,11 @@ machine may be shared, and the CPU time is what the work costs whatever else run
   bundled bag's vessel, seed 001's, on the mixed manoeuvre with realistic noise; the noise drawn
   from the seed): the bag's duration over the process's time.
 * **bundled bag, refit loop**: ``bags/demo_seed001.mcap`` (600 s) run in this process through the
-  online core's schedule (``online.identifier.run_schedule``) with the diagnosis on board at its
-  default period, as the node runs it (``replay`` does with ``--diagnosis-period``), after one
-  untimed run (imports and compiled kernels loaded): the bag's duration over the loop's time
-  (samples, refits, change watches and diagnoses).
+  online core's schedule (``online.identifier.run_schedule``) after one untimed run (imports and
+  compiled kernels loaded): the bag's duration over the loop's time (samples, refits, change
+  watches), as ``replay`` runs it by default; and again with the diagnosis on board inline at its
+  default period (``replay --diagnosis-period``; the node runs the diagnoses in a child process of
+  their own, beside the refits).
 * **node refit p95**: the real node (``bench onboard``'s measurement: DDS on a private domain,
   ``ship-ident play`` at real time, 10 Hz inputs) with the diagnosis on board on at its default
   period, on a USV drawn from the seed; the 95th percentile of the ``compute_seconds`` (wall time)
@@ -71,19 +72,19 @@ def hour_replay(seed: int, folder: str, duration: float) -> dict:
     return {"duration_s": duration, "wall_s": wall, "cpu_s": cpu, "refits": done.stdout.count('"stamp"')}
 
 
-def bundled_loop() -> dict:
-    """The bundled bag's refit loop in this process with the diagnosis on board, as the node runs it
-    (the bag read and one untimed run first): wall and CPU seconds."""
+def bundled_loop(diagnosis: bool) -> dict:
+    """The bundled bag's refit loop in this process (the bag read and one untimed run first), with
+    the diagnosis on board inline at its default period or without: wall and CPU seconds."""
     from ..diagnosis.onboard import OnlineDiagnosis
     from ..io.files import DEFAULT_TOPICS, read_samples
     from ..online.identifier import OnlineIdentifier, run_schedule
 
-    progress("realtime: the bundled bag's refit loop (one untimed run first)")
+    progress(f"realtime: the bundled bag's refit loop{' with the diagnosis inline' if diagnosis else ''}")
     samples = read_samples(BUNDLED_BAG, DEFAULT_TOPICS)
     config = OnlineConfig() if any(s.role == "speed" for s in samples) else OnlineConfig(speed_topic="")
-    list(run_schedule(OnlineIdentifier(config), samples, OnlineDiagnosis()))
+    list(run_schedule(OnlineIdentifier(config), samples, OnlineDiagnosis() if diagnosis else None))
     cpu0, wall0 = own_cpu_seconds(), time.perf_counter()
-    records = list(run_schedule(OnlineIdentifier(config), samples, OnlineDiagnosis()))
+    records = list(run_schedule(OnlineIdentifier(config), samples, OnlineDiagnosis() if diagnosis else None))
     wall, cpu = time.perf_counter() - wall0, own_cpu_seconds() - cpu0
     return {"duration_s": samples[-1].time - samples[0].time, "wall_s": wall, "cpu_s": cpu, "refits": len(records)}
 
@@ -104,13 +105,15 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
         raise ValueError("realtime draws one bag and one vessel: --count does not apply")
     with tempfile.TemporaryDirectory() as folder:
         hour = hour_replay(seed, folder, 600.0 if quick else HOUR_S)
-        loop = bundled_loop()
+        loop = bundled_loop(diagnosis=False)
+        diagnosed = bundled_loop(diagnosis=True)
         node = node_refits(seed, quick, folder)
     return {
         "cpus": os.cpu_count(),
         "load_average": os.getloadavg()[0],
         "hour_replay": hour,
         "bundled_loop": loop,
+        "bundled_loop_diagnosed": diagnosed,
         "node": node,
     }
 
@@ -120,6 +123,7 @@ def render(result: dict) -> str:
     for label, key in (
         ("replay of a simulated bag, whole process", "hour_replay"),
         ("bundled bag, refit loop", "bundled_loop"),
+        ("bundled bag, refit loop with the diagnosis inline", "bundled_loop_diagnosed"),
     ):
         r = result[key]
         rows.append(

@@ -15,9 +15,10 @@ import sys
 # The fits solve small systems (a few columns): a BLAS thread pool only costs CPU.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+from .commands import SUMMARIES
 from .errors import CommandError
 
-COMMANDS = ("simulate", "identify", "compare", "replay", "play", "diagnose", "bench")
+COMMANDS = tuple(SUMMARIES)
 
 EXIT_USAGE = 2
 
@@ -30,7 +31,9 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(commands=COMMANDS) -> argparse.ArgumentParser:
+    """The parser with every subcommand of ``commands`` in full and the others by name and summary
+    (``SUMMARIES``): a command's module, and the numeric core it imports, load only when it runs."""
     parser = OneLineParser(
         prog="ship-ident",
         description="Identify USV steering models (Nomoto) from bags and CSV files, replay bags, "
@@ -38,23 +41,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
-        try:
-            module = importlib.import_module(f"ship_ident.commands.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"ship_ident.commands.{name}":
-                raise
-            continue
-        module.add_parser(sub)
+        if name in commands:
+            importlib.import_module(f"ship_ident.commands.{name}").add_parser(sub)
+        else:
+            sub.add_parser(name, help=SUMMARIES[name])
     return parser
 
 
 def main(argv=None) -> int:
-    from .estimators import MethodError
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(commands=tuple(argv[:1])).parse_args(argv)
+
+    from .estimators import MethodError  # the errors a user can cause: after --help, which needs none
     from .model.dataset import DataError
     from .model.structure import StructureError
 
-    parser = build_parser()
-    args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except (

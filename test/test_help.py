@@ -88,3 +88,25 @@ def test_help_points_to_no_file_outside_the_repository():
     named = {name for text in texts for name in re.findall(r"[\w./-]+\.(?:md|py|yaml)\b", text)}
     assert named, "no file named in any help: the check checks nothing"
     assert [name for name in named if not (ROOT / name).exists()] == []
+
+
+def test_the_command_list_loads_no_command_and_no_numeric_core():
+    """``ship-ident --help`` (and a command's usage error) lists every command by its summary without
+    importing the command modules, the estimators or numba: a fresh process answers at once."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys\n"
+        "from ship_ident.cli import main\n"
+        "try:\n"
+        "    main(['--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "heavy = ('ship_ident.commands.', 'ship_ident.estimators', 'numba')\n"
+        "print(sorted(m for m in sys.modules if m.startswith(heavy)))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+    assert all(f"    {name}  " in done.stdout for name in COMMANDS)

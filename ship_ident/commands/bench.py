@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+from . import SUMMARIES
+
 
 def add_parser(subparsers) -> None:
     from ..bench import benchmarks
@@ -11,7 +13,7 @@ def add_parser(subparsers) -> None:
     available = benchmarks()
     parser = subparsers.add_parser(
         "bench",
-        help="run a benchmark of the estimators",
+        help=SUMMARIES["bench"],
         description="Benchmarks: " + "; ".join(f"{b.name}: {b.description}" for b in available.values()),
     )
     parser.add_argument(

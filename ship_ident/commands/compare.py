@@ -11,6 +11,7 @@ from ..errors import CommandError
 from ..io.jsonio import dumps_json
 from ..model.metrics import free_run_fit
 from ..model.structure import Structure, require_samples
+from . import SUMMARIES
 from .common import add_data_args, add_json_arg, add_recordings_arg, load_recordings, sources
 from .identify import data_field, format_fit
 from .threedof import add_threedof_args, run_compare
@@ -19,7 +20,7 @@ from .threedof import add_threedof_args, run_compare
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "compare",
-        help="run a saved model free on other data",
+        help=SUMMARIES["compare"],
         description="Drive a model saved by `identify --save` with the measured rudder of other "
         "data, starting from the measured heading and yaw rate, and compare the "
         "free-run heading and yaw rate with the measurements.",

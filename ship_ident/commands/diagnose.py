@@ -9,6 +9,7 @@ import time
 from ..diagnosis.diagnose import DEFAULT_METHOD, covered, diagnose
 from ..io.jsonio import dumps_json
 from ..model.structure import parse_effects, require_samples
+from . import SUMMARIES
 from .common import add_data_args, add_json_arg, add_model_args, add_recordings_arg, load_recordings, sources
 from .identify import data_field
 
@@ -18,7 +19,7 @@ DEG = math.degrees(1.0)
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "diagnose",
-        help="find where the model fails and which physical effect it misses",
+        help=SUMMARIES["diagnose"],
         description="Fit the model on the first part of the data, run it free on the held-out rest, "
         "show the worst segments and residual tests, and refit with every effect not "
         "yet in the model to rank what is missing. With --effects, the error before "

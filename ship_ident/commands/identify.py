@@ -10,6 +10,7 @@ from ..estimators import DEFAULT_METHOD, make_estimator
 from ..estimators.base import excitation_shortfall
 from ..io.jsonio import dumps_json
 from ..model.structure import require_samples
+from . import SUMMARIES
 from .common import (
     add_data_args,
     add_json_arg,
@@ -26,7 +27,7 @@ from .threedof import add_threedof_args, run_identify
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "identify",
-        help="identify a Nomoto (or 3-DOF) model from bags or CSV files",
+        help=SUMMARIES["identify"],
         description="Fit a Nomoto model (plus effects), or seed 000's 3-DOF model, to recorded or "
         "simulated data and report parameters, standard errors and the free-run fit.",
     )

@@ -13,13 +13,12 @@ import sys
 import time
 
 from ..io.files import DEFAULT_TOPICS, Topics, read_samples
+from . import SUMMARIES
 from .common import add_data_args, topics_from_args
 
 
 def add_parser(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "play", help="publish a bag's topics live with /clock", description=__doc__.split("\n\n", 1)[1]
-    )
+    parser = subparsers.add_parser("play", help=SUMMARIES["play"], description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("bag", metavar="BAG", help="rosbag2 directory, .mcap file or CSV file")
     add_data_args(parser)
     parser.add_argument(

@@ -34,6 +34,7 @@ from ..io.fleet import FleetError, add_fleet_arguments, run_fleet
 from ..io.jsonio import dumps_json
 from ..online.config import OnlineConfig, spec
 from ..online.outputs import error_and_floor
+from . import SUMMARIES
 from .common import add_data_args, add_model_args, topics_from_args
 
 DEFAULTS = OnlineConfig()
@@ -42,7 +43,7 @@ DEFAULTS = OnlineConfig()
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "replay",
-        help="run the online identifier over a bag, faster than real time",
+        help=SUMMARIES["replay"],
         description=__doc__.split("\n\n", 1)[1],
     )
     parser.add_argument(

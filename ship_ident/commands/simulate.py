@@ -16,6 +16,7 @@ from ..io.files import DEFAULT_TOPICS, write_simulation
 from ..model.simulator import MANEUVERS, VESSELS, simulate
 from ..model.structure import parse_effects
 from ..threedof import VESSELS as THREEDOF_VESSELS
+from . import SUMMARIES
 from .threedof import DEFAULT_VESSEL as THREEDOF_VESSEL
 from .threedof import add_threedof_args, run_simulate
 
@@ -28,7 +29,7 @@ TOPICS = ", ".join((DEFAULT_TOPICS.rudder, DEFAULT_TOPICS.heading, DEFAULT_TOPIC
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "simulate",
-        help="simulate a manoeuvre and write it as a bag or CSV",
+        help=SUMMARIES["simulate"],
         description="Simulate a manoeuvre of a vessel preset with sensor noise and write the "
         f"measurements (std_msgs/Float64 on the node's input topics {TOPICS}; heading wrapped) "
         "with the true parameters.",

@@ -36,7 +36,10 @@ named one's evidence is gone while another's holds: the pooled evidence reversed
 says so. Candidates the pool cannot tell from the named one (removing at least
 ``MIN_IMPROVEMENT``, within ``EQUIVALENT_MARGIN`` of its share, not significantly worse) are
 named with it as a group, with what would separate them
-(``SIGNATURES``). Adding or removing an effect, or a changed vessel, starts a new pool.
+(``SIGNATURES``). Among yaw damping laws, whose separate refits differ by their searches, the law
+the windows' fits holding both laws show most often (``damping_laws``) leads, and a rival law it
+does not admit reverses nothing (``_law_lead``). Adding or removing an effect, or a changed vessel,
+starts a new pool.
 
 With ``auto_add_effects``, an effect named in ``auto_add_after`` consecutive diagnoses is added
 to the model; it is kept when, within ``CHECK_DIAGNOSES`` diagnoses of the new model, the pooled

@@ -165,6 +165,7 @@ def test_a_tanker_whose_rudder_stall_runs_to_its_bound_is_recommended_the_cubic_
     first = candidates[0]
     assert first.effect == "cubic_yaw" and first.significant and undetermined(first.estimate) == []
     assert first.preferred_over == {"effect": "rudder_stall", "undetermined": undetermined(stall.estimate)}
+    assert first.near_equivalent == ["rudder_stall"]  # the group the held-out data cannot split
     assert first.improvement >= stall.improvement - EQUIVALENT_MARGIN
     assert "ranked before rudder_stall" in recommendation_sentence(first)
 
@@ -184,7 +185,7 @@ def test_a_tanker_whose_linear_damping_is_near_zero_is_recommended_the_cubic_dam
     first = candidates[0]
     assert first.effect == "course_instability" and first.estimate.structure.model == "nomoto1"
     assert first.significant and undetermined(first.estimate) == [] and first.improvement_heading >= 0.5
-    assert first.preferred_over["effect"] == "cubic_yaw"
+    assert first.preferred_over["effect"] == "cubic_yaw" and first.near_equivalent == ["cubic_yaw"]
 
 
 @pytest.mark.slow

@@ -1304,11 +1304,13 @@ def judge_across_manoeuvres(candidates: list[Candidate]) -> None:
 
 
 def equivalence_sentence(candidate: Candidate) -> str:
-    """What a sailor reads when the data cannot tell the first candidate from others ("" if they can)."""
-    if not candidate.near_equivalent:
+    """What a sailor reads when the data cannot tell the first candidate from others ("" if they can;
+    the one it was preferred over is named by ``determined_sentence``)."""
+    others = [name for name in candidate.near_equivalent if name != (candidate.preferred_over or {}).get("effect")]
+    if not others:
         return ""
     return (
-        f"; near-equivalent on these data: {', '.join(candidate.near_equivalent)} (within "
+        f"; near-equivalent on these data: {', '.join(others)} (within "
         f"{100 * EQUIVALENT_MARGIN:.0f} % and not significantly worse): another manoeuvre tells them apart"
     )
 
@@ -1549,6 +1551,7 @@ def recommend_determined(
     if determined:
         best = max(determined, key=lambda view: view.improvement)
         best.preferred_over = {"effect": first.effect, "undetermined": undetermined(first.estimate)}
+        best.near_equivalent = [first.effect]  # the held-out data cannot tell it from the one it displaced
         candidates.remove(next(c for c in candidates if c.effect == best.effect))
         candidates.insert(0, best)
 
@@ -1655,6 +1658,7 @@ def mark_near_equivalents(candidates: list[Candidate], held_out: Dataset) -> Non
     for c in candidates[1:]:
         if (
             c.estimate is None
+            or c.effect in first.near_equivalent
             or c.improvement < MIN_IMPROVEMENT
             or first.improvement - c.improvement > EQUIVALENT_MARGIN
         ):

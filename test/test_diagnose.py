@@ -541,6 +541,25 @@ def test_a_slow_ship_rudder_offset_whose_search_crawled_is_refined_on_long_runs(
     assert held_out_error(refined.parameters) < 0.5 * held_out_error(fit.parameters)
 
 
+def test_a_slow_ship_with_quadratic_damping_on_a_small_zigzag_finds_its_fast_pole_on_long_runs():
+    """A ship (T1 22.8 s, fast pole m2 1.6 s, rudder lead b1 / b0 3.6 s) with a quadratic yaw damping
+    on a 10/10 zigzag: on the search's 30 s intervals its candidate loses the fast pole (m2 a
+    hundredth of the truth's) and removes a fraction of the held-out heading error. Searched on
+    intervals as long as the training windows from the fast-pole starts, it finds the hull and
+    removes more than half of that error, as the truth does."""
+    base, fit, truth, held_out = _fitted_with_and_without(87757626, "quadratic_yaw")
+    assert fit.parameters["m2"] < 0.1 * truth["m2"]
+    training, rest = split(draw_case(87757626, ("quadratic_yaw",))[2].dataset)
+    window = held_out_window(base.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
+    refined = on_long_runs(fit, training, DEFAULT_METHOD, windows(training, window))
+    print(refined.parameters)
+    for name, tolerance in (("m2", 0.3), ("a1", 0.15), ("d_q", 0.15), ("b0", 0.1)):
+        assert refined.parameters[name] == pytest.approx(truth[name], rel=tolerance), name
+    before = free_run(base.structure, base.parameters, held_out).fit["rmse_heading"]
+    after = free_run(fit.structure, refined.parameters, held_out).fit["rmse_heading"]
+    assert after < 0.5 * before
+
+
 def test_a_linear_damping_near_zero_is_determined_against_the_damping_of_the_turns_sailed():
     """A hull whose cross-flow drag holds its turns (d_q 1.2 1/rad at 0.03 rad/s RMS: 0.036 1/s)
     while its linear damping is 0.002 +- 0.006 1/s: the sign of a1 is unknown, the damping of the

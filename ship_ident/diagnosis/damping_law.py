@@ -77,7 +77,9 @@ class DampingLaw:
         )
 
 
-def damping_law(estimate: Estimate, recorded: Dataset, starts: list[dict], method: str) -> DampingLaw | None:
+def damping_law(
+    estimate: Estimate, recorded: Dataset, starts: list[dict], method: str, shooting_s: float | None = None
+) -> DampingLaw | None:
     """Fit the model that holds both damping laws and read which one the data show.
 
     Parameters
@@ -91,6 +93,9 @@ def damping_law(estimate: Estimate, recorded: Dataset, starts: list[dict], metho
         starts from ``estimate`` with no nonlinear damping.
     method : str
         The estimation method (``make_estimator``).
+    shooting_s : float or None
+        The search's shooting intervals (s), when not the estimator's own (a slow hull's, as long
+        as the free runs the laws are judged by).
 
     Returns
     -------
@@ -104,9 +109,18 @@ def damping_law(estimate: Estimate, recorded: Dataset, starts: list[dict], metho
         {name: value for name, value in joint.neutral_effect_start(p).items() if name in joint.parameter_names}
         for p in (*starts, estimate.parameters)
     ]
-    fit = make_estimator(method, explore=False).fit(joint, recorded, starts=tuple(points))
+    search = make_estimator(method, explore=False)
+    if shooting_s is not None:
+        search.shooting_s = shooting_s
+    fit = search.fit(joint, recorded, starts=tuple(points))
     if not fit.ok:
         return None
+    if shooting_s is not None and search.uses_starts:
+        # on a slow hull's long intervals the start the search picks by its first cost can be the
+        # regression's, with the fast pole lost: each start is searched, the least cost is the law
+        weighted_at = fit.parameters  # one weighting, so that the costs compare
+        searched = [search.fit_held(joint, recorded, fit, dict(p), (), weighted_at) for p in (fit.parameters, *points)]
+        fit = min((f for f in searched if f.ok), key=lambda f: f.info["cost"], default=fit)
     p, std = fit.parameters, fit.std_errors
     r = recorded.yaw_rate
     quadratic = p["d_q"] * float(np.sqrt(np.mean((r * np.abs(r)) ** 2)))

@@ -24,7 +24,8 @@ or names it as the one near-equivalent effect on these data (``Candidate.near_eq
 diagnosis says both; a list of several names nothing; the share named alone is printed too),
 and **fixed** when the hidden effect's candidate removes at least half of the held-out error
 (the larger of heading and yaw rate, as ``improvement``); for a pair, at least half of what the
-true pair removes (the diagnosis adds one effect per round). The share of fair cases also called
+true pair removes: by the first alone, or by both where the diagnosis names them missing together
+(``Diagnosis.missing_pair``). The share of fair cases also called
 ``missing_effect`` (the candidate significant, not only first) is printed beside it. On the none cases the share of
 ``missing_effect`` verdicts is the false alarm rate. Seeds are drawn fresh each run and printed.
 
@@ -240,7 +241,12 @@ def run_case(seed: int, hidden: tuple[str, ...]) -> dict:
         row["named_first"] = bool(named)
         row["near_equivalent"] = top.near_equivalent
         needed = FIXED_SHARE * (row["true_improvement_over_diagnosed"] if len(hidden) > 1 else 1.0)
-        row["fixed"] = bool(named and max(c.improvement for c in named) >= needed)
+        together = result.missing_pair
+        row["together"] = None if together is None else together.effect
+        both = together is not None and {top.effect, together.effect} == set(hidden)
+        row["fixed"] = bool(
+            named and (max(c.improvement for c in named) >= needed or (both and together.improvement >= needed))
+        )
     return row
 
 
@@ -266,6 +272,7 @@ def run_ours(quick: bool = False, seed: int = 0, count: int | None = None) -> di
             f"hidden-effects {k + 1}/{count}: {row['hidden']} on {row['vessel']} ({row['manoeuvre']}, "
             f"seed {case_seed}): top {row['top']} {100 * row['top_improvement']:.0f} %"
             + (f" (near-equivalent: {', '.join(row['near_equivalent'])})" if row.get("near_equivalent") else "")
+            + (f", missing together with {row['together']}" if row.get("together") else "")
             + f", {row['verdict']}"
             + (
                 f", true model {100 * row['true_improvement']:.0f} % "

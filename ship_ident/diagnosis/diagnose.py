@@ -40,7 +40,11 @@ without it) and run free on the same held-out windows.
   fast pole undetermined and the first-order fit runs about as well
   (``first_order_view``), else a near-equivalent candidate whose
   parameters are all determined ranks first. Neither changes the verdict.
-* ``verdict`` is ``missing_effect`` when any candidate is significant;
+* When the residual keeps structure and no effect alone removes ``MOST_OF_THE_ERROR``,
+  the first candidate is also fitted together with each other effect (``second_effect``):
+  where a pair is significant and halves what the first leaves, both are named missing
+  together and recommended (a rudder offset beside a wind hide each other when refitted alone).
+* ``verdict`` is ``missing_effect`` when any candidate, or such a pair, is significant;
   ``adequate`` only when the held-out residual tests pass (white, independent
   of the rudder) and no parameter is pinned at a physical bound; otherwise
   ``unexplained``, with a sentence saying what the residual follows (rudder,
@@ -100,6 +104,7 @@ SPEED_SPAN = 1.25  # speed exponents are fitted only when the training's 95th/5t
 # percentiles differ by this factor; else K ~ U, T ~ 1/U (n_K = n_T = 1)
 EQUIVALENT_MARGIN = 0.15  # a candidate within this improvement of the first, whose held-out yaw-rate
 # loss the first does not beat significantly (t < SIGNIFICANCE_T), is near-equivalent on these data
+PAIR_LEFT = 0.5  # a second effect fitted with the first must halve the held-out error the first leaves
 PARSIMONY = 0.005  # ranking: each parameter of a candidate costs this share of improvement
 # (course_instability holds cubic_yaw: at equal gain the simpler ranks first)
 # the effect that frees a parameter pinned at a physical bound
@@ -155,6 +160,8 @@ class Candidate:
     # (the first) the near-equivalent candidate it was ranked before, whose parameters the data do not determine
     preferred_over: dict | None = None
     damping_law: DampingLaw | None = None  # (the first) the law a fit holding both shows (``rank_damping_laws``)
+    # (the first) the second effect it is missing together with: the two fitted together (``second_effect``)
+    together: Candidate | None = None
 
     def to_json(self) -> dict:
         return {
@@ -181,6 +188,7 @@ class Candidate:
             "damping_law": None
             if self.damping_law is None
             else {**asdict(self.damping_law), "stability": self.damping_law.stability},
+            "together_with": None if self.together is None else self.together.to_json(),
         }
 
 
@@ -229,7 +237,7 @@ class Diagnosis:
     @property
     def verdict(self) -> str:
         """``missing_effect``, ``adequate`` or ``unexplained`` (see the module's docstring)."""
-        if any(c.significant for c in self.candidates):
+        if any(c.significant for c in self.candidates) or self.missing_pair is not None:
             return "missing_effect"
         tests = self.residual_tests
         if tests["white"] and tests["independent_of_rudder"] and not self.pinned:
@@ -237,13 +245,20 @@ class Diagnosis:
         return "unexplained"
 
     @property
+    def missing_pair(self) -> Candidate | None:
+        """The second effect the first candidate is missing together with (``second_effect``: the
+        first's ``together``), else None."""
+        return self.candidates[0].together if self.candidates else None
+
+    @property
     def recommendation(self) -> dict | None:
         """The model to fit next when an effect is missing, as the JSON's ``recommendation`` gives it.
 
         The significant candidate's base model (nomoto1 where the data do not determine a second pole,
-        ``first_order_view``) and effects, {'model': ..., 'effects': [...]}; None for any other verdict.
+        ``first_order_view``) and effects, {'model': ..., 'effects': [...]}, both effects of a
+        ``missing_pair``; None for any other verdict.
         """
-        best = next((c for c in self.candidates if c.significant), None)
+        best = self.missing_pair or next((c for c in self.candidates if c.significant), None)
         if best is None or best.estimate is None:
             return None
         return best.estimate.structure.to_json()
@@ -252,6 +267,8 @@ class Diagnosis:
     def verdict_sentence(self) -> str:
         """One sentence a sailor reads: why the verdict."""
         verdict = self.verdict
+        if self.missing_pair is not None:
+            return pair_sentence(self.candidates[0])
         if verdict == "missing_effect":
             best = next(c for c in self.candidates if c.significant)
             return (
@@ -1685,6 +1702,75 @@ def first_order_sentence(candidate: Candidate) -> str:
     )
 
 
+def second_effect(
+    candidates: list[Candidate],
+    training: Dataset,
+    judged: tuple,
+    method: str,
+    workers: int,
+) -> None:
+    """Fit, in place, the first candidate together with each other effect, and keep in its
+    ``together`` the pair that removes most of the held-out error when that pair is significant and
+    leaves at most ``PAIR_LEFT`` of the error the first leaves alone.
+
+    Two effects can hide each other: a rudder offset beside a wind, a constant moment beside one
+    that turns with the heading, each refitted alone bends the model to carry part of the other
+    and removes a third of the error, while both together remove nearly all of it. Called when the
+    residual still carries structure and no effect alone removes ``MOST_OF_THE_ERROR``.
+
+    Parameters
+    ----------
+    candidates : list of Candidate
+        The candidates, ranked; the first gains ``together``.
+    training : Dataset
+        The training data.
+    judged : tuple
+        (held-out windows, the model's held-out runs, training windows, the model's training runs).
+    method : str
+        The estimation method (``make_estimator``).
+    workers : int
+        Processes that fit the pairs.
+    """
+    first = candidates[0] if candidates else None
+    if first is None or first.estimate is None:
+        return
+    held_out, run, fitted_windows, fitted_run = judged
+    structure = first.estimate.structure
+    partners = [
+        c
+        for c in candidates[1:]
+        if c.effect not in structure.effect_names
+        and c.effect not in EFFECTS[first.effect].replaces
+        and first.effect not in EFFECTS[c.effect].replaces
+    ]
+    tasks = []
+    for c in partners:
+        start = dict(first.estimate.parameters)
+        if c.estimate is not None:  # the partner's own fitted terms, on the first's model
+            start.update({p.name: c.estimate.parameters[p.name] for p in EFFECTS[c.effect].parameters})
+        tasks.append((structure.adding(c.effect), training, method, start))
+    pairs = [
+        judge(c.effect, c.evidence, held_out, run, fit, fitted_windows, fitted_run)
+        for c, fit in zip(partners, _map(tasks, workers))
+    ]
+    halving = [p for p in pairs if p.significant and 1.0 - p.improvement <= PAIR_LEFT * (1.0 - first.improvement)]
+    if halving:
+        first.together = max(halving, key=lambda p: p.improvement)
+
+
+def pair_sentence(first: Candidate) -> str:
+    """What a sailor reads when the first candidate is missing together with another (``together``)."""
+    pair = first.together
+    return (
+        f"{first.effect} and {pair.effect} are missing together: {first.effect} alone removes "
+        f"{100 * first.improvement:.0f} % of the held-out error"
+        + ("" if first.significant else ", not significantly")
+        + "; both remove "
+        f"{100 * pair.improvement_heading:.0f} % of the heading and {100 * pair.improvement_yaw_rate:.0f} % "
+        "of the yaw-rate error"
+    )
+
+
 def mark_near_equivalents(candidates: list[Candidate], held_out: Dataset) -> None:
     """Name in the first candidate the others the held-out data cannot tell from it: their improvement
     within ``EQUIVALENT_MARGIN`` of the first's and at least ``MIN_IMPROVEMENT``, and the first's
@@ -1716,6 +1802,7 @@ def diagnose(
     progress=None,
     workers: int | None = None,
     validation: Dataset | None = None,
+    pairs: bool = True,
 ) -> Diagnosis:
     """Fit, validate on held-out free runs, locate the failures and rank the missing effects.
 
@@ -1747,6 +1834,9 @@ def diagnose(
         Processes that refit the candidates (default: the CPU count).
     validation : Dataset or None
         Held-out data from another recording.
+    pairs : bool
+        Whether, when no effect alone removes most of the error and the residual keeps structure, the
+        first candidate is also fitted with each other effect (``second_effect``).
 
     Returns
     -------
@@ -1806,6 +1896,19 @@ def diagnose(
     mark_near_equivalents(candidates, held_out)
     say("locating the worst segments and testing the residual")
     worst = _locate_failures(dataset, training, rest, validation is not None, structure, estimate, before)
+    tests, warnings = residual_tests(held_out, run), parameter_warnings(estimate)
+    pinned = any(w["kind"].startswith("at_") for w in warnings)
+    settled = tests["white"] and tests["independent_of_rudder"] and not pinned
+    first = candidates[0] if candidates else None
+    if (
+        pairs
+        and not settled
+        and first is not None
+        and first.improvement < MOST_OF_THE_ERROR
+        and (first.significant or not any(c.significant for c in candidates))
+    ):
+        say(f"no effect alone removes most of the error: fitting {first.effect} together with each other effect")
+        second_effect(candidates, training, judged, method, workers)
     noise = {
         "heading": dataset.noise_std("heading"),
         "yaw_rate": dataset.noise_std("yaw_rate"),
@@ -1819,8 +1922,8 @@ def diagnose(
         context=context,
         candidates=candidates,
         worst_segments=worst,
-        residual_tests=residual_tests(held_out, run),
-        parameter_warnings=parameter_warnings(estimate),
+        residual_tests=tests,
+        parameter_warnings=warnings,
         noise=noise,
         cross_manoeuvre=validation is not None,
         before=before,

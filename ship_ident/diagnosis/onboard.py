@@ -165,7 +165,9 @@ def diagnose_window(dataset: Dataset, model: str, effects: tuple, stamp: float, 
     record = skipped(stamp, model, effects, reason)
     if reason is None:
         try:
-            result = diagnose(dataset, model, effects, workers=1)
+            # one effect per round: the pool weighs single effects, and once the first of two is added
+            # the next diagnoses see the second alone
+            result = diagnose(dataset, model, effects, workers=1, pairs=False)
         except (DataError, StructureError, ValueError, np.linalg.LinAlgError) as exc:
             record["reason"] = f"fit failed: {exc}"
         else:

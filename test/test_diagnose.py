@@ -603,3 +603,22 @@ def test_a_usv_with_a_rudder_offset_in_a_wind_is_told_both_are_missing_together(
     assert fitted["delta_r"] == pytest.approx(sim.truth["delta_r"], rel=0.15)
     assert fitted["wind_s1"] == pytest.approx(sim.truth["wind_s1"], rel=0.1)
     assert result.to_json()["candidates"][0]["together_with"]["effect"] == pair.effect
+
+
+def test_a_slow_ship_with_a_large_rudder_offset_is_refined_on_long_runs_until_it_converges():
+    """A ship (T1 22 s, T3 6.6 s) holding 7.2 deg of rudder offset, on a mixed manoeuvre: fitted without
+    the offset, the model runs off to T1 311 s and T3 56 s, where 30 s shooting intervals fit as well
+    as the truth, and its offset's candidate, searched from there, runs no closer (the offset at zero,
+    as the diagnosis leaves it). Refined on the training windows' long runs, one round stops
+    unconverged at T1 167 s, and going on from there finds the hull and the offset (measured: K and
+    the offset within 0.2 %, T1 within 0.3 %)."""
+    _, _, sim = draw_case(1326168109, ("rudder_offset",))
+    training, _ = split(sim.dataset)
+    run_off = {"K": 0.17502115887431308, "T1": 310.69413546780925, "T2": 7.169762157701966, "T3": 56.05573559070839}
+    structure = Structure("nomoto2", ("rudder_offset",))
+    flags = ["oe_not_converged", NOT_BETTER]
+    stopped = Estimate(structure, DEFAULT_METHOD, dict(run_off, delta_r=0.0), {}, {}, training.n_samples, flags=flags)
+    refined = on_long_runs(stopped, training, DEFAULT_METHOD, windows(training, 60.0))  # the diagnosis's windows
+    print(refined.parameters)
+    for name in ("K", "T1", "delta_r"):
+        assert refined.parameters[name] == pytest.approx(sim.truth[name], rel=0.02), name

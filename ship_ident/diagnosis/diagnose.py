@@ -1127,6 +1127,7 @@ def along_the_valley(refit: Estimate | str, training: Dataset, method: str, fitt
 LONG_RUNS_RATIO = 1.5  # free runs this many times the search's shooting interval are long enough to refine on
 SLOW_HULL_SPAN = 3.0  # a hull is slow when this many slow time constants exceed the shooting interval
 FAST_POLE_SHARES = (0.05, 0.1, 0.2)  # fast-pole starts of a slow hull: T2 this share of T1 + T2
+LONG_RUN_ROUNDS = 3  # a long-run refinement stopped unconverged goes on from where it stopped, this many rounds in all
 
 
 def slow_hull(parameters: dict, method: str) -> bool:
@@ -1168,9 +1169,13 @@ def on_long_runs(refit: Estimate | str, training: Dataset, method: str, fitted_w
     So a slow hull's fit is also searched from ``fast_pole_starts``, and of the refinements the one
     whose training free runs miss the heading least is taken. A refinement that runs a parameter
     onto a physical bound the fit was not on is not a hull (a slow ship's 4.3 s rudder delay went
-    to its 5 s bound so). A converged fit of a quick hull is left alone. The model and every
-    candidate are refined alike, so a candidate is never credited with the model's shorter
-    intervals.
+    to its 5 s bound so). A refinement that stops unconverged goes on from where it stopped, while
+    each round closes in as much again (``LONG_RUN_ROUNDS`` rounds at most): a slow ship (T1 22 s)
+    with a 7 deg rudder offset, fitted without it at T1 500 s and T3 150 s, had its offset's
+    candidate refined to T1 167 s in one round (20 % of the held-out error removed) and to the
+    truth in the next (79 %, as the truth). A converged fit of a quick hull is left alone. The
+    model and every candidate are refined alike, so a candidate is never credited with the
+    model's shorter intervals.
 
     Parameters
     ----------
@@ -1206,10 +1211,20 @@ def on_long_runs(refit: Estimate | str, training: Dataset, method: str, fitted_w
         return refit
     runs = [free_run(structure, fit.parameters, fitted_windows).fit for fit in refined]
     best = min(range(len(refined)), key=lambda k: runs[k]["rmse_heading"])
-    before, after = free_run(structure, refit.parameters, fitted_windows).fit, runs[best]
-    closer = after["rmse_heading"] < (1.0 - VALLEY_GAIN) * before["rmse_heading"]
-    no_worse_rate = after["rmse_yaw_rate"] <= (1.0 + MIN_TRAINING_GAIN) * before["rmse_yaw_rate"]
-    return refined[best] if closer and no_worse_rate else refit
+    chosen, before, after = refit, free_run(structure, refit.parameters, fitted_windows).fit, runs[best]
+    for _ in range(LONG_RUN_ROUNDS):
+        closer = after["rmse_heading"] < (1.0 - VALLEY_GAIN) * before["rmse_heading"]
+        no_worse_rate = after["rmse_yaw_rate"] <= (1.0 + MIN_TRAINING_GAIN) * before["rmse_yaw_rate"]
+        if not (closer and no_worse_rate):
+            break
+        chosen, before = refined[best], after
+        if "oe_not_converged" not in chosen.flags:
+            break
+        refined, best = [longer_search.fit_held(structure, training, chosen, dict(chosen.parameters), ())], 0
+        if not {f for f in refined[0].flags if f.startswith("at_bound:")} <= pinned:
+            break
+        after = free_run(structure, refined[0].parameters, fitted_windows).fit
+    return chosen
 
 
 def _refit_task(args) -> Estimate | str:

@@ -10,6 +10,7 @@ import pytest
 
 from ship_ident import cli
 from ship_ident.bench.hidden_effects import draw_case
+from ship_ident.commands.diagnose import format_diagnosis
 from ship_ident.diagnosis.damping_law import damping_law
 from ship_ident.diagnosis.diagnose import (
     DEFAULT_METHOD,
@@ -603,6 +604,9 @@ def test_a_usv_with_a_rudder_offset_in_a_wind_is_told_both_are_missing_together(
     assert fitted["delta_r"] == pytest.approx(sim.truth["delta_r"], rel=0.15)
     assert fitted["wind_s1"] == pytest.approx(sim.truth["wind_s1"], rel=0.1)
     assert result.to_json()["candidates"][0]["together_with"]["effect"] == pair.effect
+    text = format_diagnosis(result, "trip.mcap")
+    assert f"with {pair.effect} as well: improvement" in text
+    assert "--effects " + ",".join(result.recommendation["effects"]) in text
 
 
 def test_a_slow_ship_with_a_large_rudder_offset_is_refined_on_long_runs_until_it_converges():

@@ -147,6 +147,13 @@ def format_diagnosis(result, source, options: str = "") -> str:
             lines.append(f"      ranked before {other['effect']}: its {', '.join(other['undetermined'])} undetermined")
         if c.near_equivalent:
             lines.append(f"      near-equivalent on these data: {', '.join(c.near_equivalent)}")
+        if c.together:
+            pair = c.together
+            lines.append(
+                f"      with {pair.effect} as well: improvement {100 * pair.improvement:.1f} % (heading "
+                f"{100 * pair.improvement_heading:.0f} %, yaw rate {100 * pair.improvement_yaw_rate:.0f} %), "
+                f"significant (t {pair.t_statistic:.1f})"
+            )
     recommendation = result.recommendation
     if recommendation is not None:
         effects = ",".join(recommendation["effects"])

@@ -246,8 +246,10 @@ class Diagnosis:
 
     @property
     def missing_pair(self) -> Candidate | None:
-        """The second effect the first candidate is missing together with (``second_effect``: the
-        first's ``together``), else None."""
+        """The second effect the first candidate is missing together with, else None.
+
+        The first candidate's ``together`` (``second_effect``): the pair fitted and judged as one
+        candidate, named by its second effect."""
         return self.candidates[0].together if self.candidates else None
 
     @property

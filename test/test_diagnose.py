@@ -626,3 +626,17 @@ def test_a_slow_ship_with_a_large_rudder_offset_is_refined_on_long_runs_until_it
     print(refined.parameters)
     for name in ("K", "T1", "delta_r"):
         assert refined.parameters[name] == pytest.approx(sim.truth[name], rel=0.02), name
+
+
+def test_a_usv_with_a_gyro_bias_in_a_wind_is_told_both_are_missing_together():
+    """A USV (K 0.22 1/s, T1 10.7 s) on a 20/20 zigzag whose gyro reads 0.64 deg/s off while a wind
+    turns it by up to 1.6 deg/s: refitted alone, the bias and the wind each run the training free
+    runs worse than the model without them, and no candidate removes anything. The residual follows
+    the gyro bias most; fitted with the wind, it removes nearly all of the held-out heading error."""
+    _, _, sim = draw_case(1963589367, ("gyro_bias", "wind_yaw"))
+    result = diagnose(sim.dataset, "nomoto2", (), workers=1)
+    first, pair = result.candidates[0], result.missing_pair
+    assert first.effect == "gyro_bias" and first.improvement < 0.15
+    assert pair is not None and pair.effect == "wind_yaw" and pair.improvement_heading > 0.8
+    assert result.verdict == "missing_effect"
+    assert pair.estimate.parameters["r_bias"] == pytest.approx(sim.truth["r_bias"], rel=0.1)

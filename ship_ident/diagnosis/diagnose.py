@@ -1733,12 +1733,17 @@ def second_effect(
     Two effects can hide each other: a rudder offset beside a wind, a constant moment beside one
     that turns with the heading, each refitted alone bends the model to carry part of the other
     and removes a third of the error, while both together remove nearly all of it. Called when the
-    residual still carries structure and no effect alone removes ``MOST_OF_THE_ERROR``.
+    residual still carries structure and no effect alone removes ``MOST_OF_THE_ERROR``. Where no
+    candidate removes even ``MIN_IMPROVEMENT``, the pairs are built on the effect the residual
+    follows most (its evidence score), not on a first candidate that removes nothing: a USV's gyro
+    bias beside a wind, each of which alone ran the training free runs worse than the model
+    without it, while both together remove 96 % of the held-out heading error. A pair found puts
+    its first effect first.
 
     Parameters
     ----------
     candidates : list of Candidate
-        The candidates, ranked; the first gains ``together``.
+        The candidates, ranked; the pair's first effect gains ``together`` and is put first.
     training : Dataset
         The training data.
     judged : tuple
@@ -1748,15 +1753,19 @@ def second_effect(
     workers : int
         Processes that fit the pairs.
     """
-    first = candidates[0] if candidates else None
-    if first is None or first.estimate is None:
+    fitted = [c for c in candidates if c.estimate is not None]
+    if not fitted:
         return
+    first = candidates[0]
+    if first.estimate is None or first.improvement < MIN_IMPROVEMENT:
+        first = max(fitted, key=lambda c: c.evidence.score)
     held_out, run, fitted_windows, fitted_run = judged
     structure = first.estimate.structure
     partners = [
         c
-        for c in candidates[1:]
-        if c.effect not in structure.effect_names
+        for c in candidates
+        if c is not first
+        and c.effect not in structure.effect_names
         and c.effect not in EFFECTS[first.effect].replaces
         and first.effect not in EFFECTS[c.effect].replaces
     ]
@@ -1773,6 +1782,8 @@ def second_effect(
     halving = [p for p in pairs if p.significant and 1.0 - p.improvement <= PAIR_LEFT * (1.0 - first.improvement)]
     if halving:
         first.together = max(halving, key=lambda p: p.improvement)
+        candidates.remove(first)
+        candidates.insert(0, first)
 
 
 def pair_sentence(first: Candidate) -> str:

@@ -17,6 +17,7 @@ from ship_ident.diagnosis.diagnose import (
     NOT_BETTER,
     Candidate,
     _fit,
+    across_the_fold,
     along_the_valley,
     diagnose,
     extrapolation,
@@ -626,6 +627,31 @@ def test_a_slow_ship_with_a_large_rudder_offset_is_refined_on_long_runs_until_it
     print(refined.parameters)
     for name in ("K", "T1", "delta_r"):
         assert refined.parameters[name] == pytest.approx(sim.truth[name], rel=0.02), name
+
+
+def test_a_usv_whose_rudder_stalls_is_searched_on_from_the_fold_in_the_acceleration_form():
+    """A USV (K 0.19 1/s, T1 1.7 s, T2 0.42 s) whose rudder lead (T3 2.0 s) exceeds its main time
+    constant and whose rudder stalls (c_stall 0.9): its stall candidate's Nomoto search stopped on the
+    fold T1 = T2 = 0.76 s, where only their sum and product are determined. Searched on from there in
+    the acceleration form, it finds the hull (K, T1 + T2, T1 T2 and T3 within 2 %) and runs closer to
+    the training data."""
+    _, _, sim = draw_case(878037618, ("rudder_stall",))
+    training, _ = split(sim.dataset)
+    fitted_windows = windows(training, 60.0)
+    on_fold = {"K": 0.1928, "T1": 0.7578, "T2": 0.7578, "T3": 1.3954, "c_stall": 0.9}
+    structure = Structure("nomoto2", ("rudder_stall",))
+    flags = ["repeated_time_constants", "at_bound:c_stall"]
+    stopped = Estimate(structure, DEFAULT_METHOD, on_fold, {}, {}, training.n_samples, flags=flags)
+    searched = across_the_fold(stopped, training, DEFAULT_METHOD, fitted_windows)
+    assert searched.structure.form == "acceleration"
+    before, after = (free_run(e.structure, e.parameters, fitted_windows) for e in (stopped, searched))
+    assert after.fit["rmse_yaw_rate"] < before.fit["rmse_yaw_rate"]
+    found, truth = nomoto_parameters(searched.parameters), sim.truth
+    print(found)
+    assert found["K"] == pytest.approx(truth["K"], rel=0.02)
+    assert found["T1"] + found["T2"] == pytest.approx(truth["T1"] + truth["T2"], rel=0.02)
+    assert found["T1"] * found["T2"] == pytest.approx(truth["T1"] * truth["T2"], rel=0.02)
+    assert found["T3"] == pytest.approx(truth["T3"], rel=0.02)
 
 
 def test_a_usv_with_a_gyro_bias_in_a_wind_is_told_both_are_missing_together():

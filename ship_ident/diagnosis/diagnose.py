@@ -1407,13 +1407,34 @@ def shared_fits(refits: dict, training: Dataset, method: str, fitted_windows: Da
             if any(k not in start for k in own.structure.free_names):
                 continue
             again = _estimator(method).fit(own.structure, training, starts=(start,))
-
-            def error(estimate: Estimate) -> float:
-                return free_run(estimate.structure, estimate.parameters, fitted_windows).fit["rmse_yaw_rate"]
-
-            if error(again) < error(own):
+            if training_error(again, fitted_windows) < training_error(own, fitted_windows):
                 out[inner] = again
     return out
+
+
+def training_error(estimate: Estimate, fitted_windows: Dataset) -> float:
+    """The yaw-rate RMSE (rad/s) of ``estimate``'s free runs on the training windows."""
+    return free_run(estimate.structure, estimate.parameters, fitted_windows).fit["rmse_yaw_rate"]
+
+
+def across_the_fold(refit: Estimate | str, training: Dataset, method: str, fitted_windows: Dataset) -> Estimate | str:
+    """``refit``, or where its Nomoto search stopped on the fold T1 = T2 (``repeated_time_constants``),
+    the same model searched on from there in the acceleration form, whichever runs closer to the
+    training windows' yaw rate. On the fold only the time constants' sum and product are determined
+    and a Nomoto search stays there (the free run is symmetric in T1 and T2); the acceleration form
+    (b0, b1, m2, a1) has no fold. A USV whose rudder stalls, with a rudder lead beyond its main time
+    constant: its stall candidate stopped on the fold removed 58 % of the held-out heading error,
+    searched on in the acceleration form the 79 % its truth removes."""
+    if not isinstance(refit, Estimate) or "repeated_time_constants" not in refit.flags or refit.structure.acceleration:
+        return refit
+    structure = copy(refit.structure)
+    held = Structure(structure.model, structure.effect_names, acceleration=True)
+    fixed = [n for n in structure.fixed_names if n not in held.fixed_names]  # held by the speed law
+    held.fixed_names += fixed
+    held.free_names = [n for n in held.free_names if n not in fixed]
+    start = held.in_form(refit.parameters)
+    again = _estimator(method).fit(held, training, starts=(start,))
+    return again if training_error(again, fitted_windows) < training_error(refit, fitted_windows) else refit
 
 
 def ranking(candidates: list[Candidate]):
@@ -1898,11 +1919,13 @@ def diagnose(
         f"on {min(workers, len(fittable))} processes"
     )
 
+    fitted_windows = windows(training, window)
+
     def refit_candidates(base: Estimate) -> dict:
         tasks = [(structure.adding(n), training, method, base.parameters) for n in fittable]
-        return dict(zip(fittable, _map(tasks, workers)))
+        refits = dict(zip(fittable, _map(tasks, workers)))
+        return {n: across_the_fold(r, training, method, fitted_windows) for n, r in refits.items()}
 
-    fitted_windows = windows(training, window)
     estimate, refits, fitted_run = _settle(structure, training, method, estimate, refit_candidates, fitted_windows, say)
     moved = on_long_runs(along_the_valley(estimate, training, method, fitted_windows), training, method, fitted_windows)
     if moved is not estimate:

@@ -26,7 +26,8 @@ the coefficient of r' instead (the yaw inertia of a first-order hull, T1 + T2
 of a second-order one: dividing by T1 T2 would spread a loosely known fast
 pole over every parameter). A structure with an effect that frees the linear
 damping (``Effect.frees_linear_damping``) is therefore fitted in that
-*acceleration form* (Norrbin's form):
+*acceleration form* (Norrbin's form), and so is one whose Nomoto search stopped
+on the fold T1 = T2 (``acceleration``: the acceleration form has no fold):
 
     nomoto1:  r' = b delta - a1 r + G
     nomoto2:  r' = -m2 r'' - a1 r + b0 delta + b1 delta' + G
@@ -97,9 +98,13 @@ class Regression:
 
 
 class Structure:
-    """A base model (``nomoto1``/``nomoto2``) and a list of effects."""
+    """A base model (``nomoto1``/``nomoto2``) and a list of effects.
 
-    def __init__(self, model: str = "nomoto2", effects=()):
+    ``acceleration`` holds it in the acceleration form whatever its effects (a Nomoto search that
+    stopped on the fold T1 = T2 goes on there).
+    """
+
+    def __init__(self, model: str = "nomoto2", effects=(), acceleration: bool = False):
         if model not in BASE_MODELS:
             raise StructureError(f"unknown model {model!r}; choose from {', '.join(BASE_MODELS)}")
         effects = parse_effects(effects)
@@ -112,7 +117,8 @@ class Structure:
                 raise StructureError(
                     f"{effect.name} includes {clash[0]}'s term (the same term twice has no unique fit); list one"
                 )
-        self.form = "acceleration" if any(e.frees_linear_damping for e in self.effects) else "nomoto"
+        self.acceleration = acceleration
+        self.form = "acceleration" if acceleration or any(e.frees_linear_damping for e in self.effects) else "nomoto"
         base = ACCELERATION_MODELS[model] if self.form == "acceleration" else BASE_MODELS[model]
         self.base_names = [p.name for p in base]
         self.parameters: tuple[Parameter, ...] = base + tuple(p for e in self.effects for p in e.parameters)
@@ -141,9 +147,9 @@ class Structure:
         Returns
         -------
         Structure
-            The new structure.
+            The new structure (in the acceleration form where this one is held there).
         """
-        return Structure(self.model, list(effects))
+        return Structure(self.model, list(effects), self.acceleration)
 
     def adding(self, effect: str) -> Structure:
         """This structure with ``effect`` added, in place of the effects whose term it includes.

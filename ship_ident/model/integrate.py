@@ -25,7 +25,7 @@ from numba import njit
 TRIG_NONE, TRIG_COS, TRIG_SIN = 0, 1, 2
 TERM_FIELDS = ("r_power", "abs_power", "harmonic", "trig")  # integer fields of a forcing term, in kernel order
 RK4_NODES = np.array([0.0, 0.5, 0.5, 1.0])  # stage times within a step, in steps
-# Up to this many lanes ``simulate_kernel`` steps them one after the other, beyond it in vector loops
+# Up to this many lanes ``simulate_kernel`` steps them in pairs over all their samples, beyond it in vector loops
 # (the faster way on either side, measured on a replay's runs)
 MOST_LANES_ONE_BY_ONE = 24
 
@@ -33,7 +33,7 @@ MOST_LANES_ONE_BY_ONE = 24
 @njit(cache=True, inline="always")
 def _forcing(psi, r, coef, r_power, abs_power, harmonic, trig):
     """Yaw forcing (rad/s) of one state: sum of coef r^r_power |r|^abs_power trig(harmonic psi).
-    Inlined where it is called (a single chain, or a few lanes stepped one by one); ``_forcing_lanes``
+    Inlined where it is called (a single chain, or a few lanes stepped in pairs); ``_forcing_lanes``
     evaluates the same sum over many lanes at once, in vector loops."""
     total = 0.0
     for j in range(coef.shape[0]):
@@ -261,68 +261,170 @@ def _lane_slopes(order, tp, tr, tz, d, lane_constants, coef, r_power, abs_power,
     return tr, (tz - S * tr + KT3 * d) * inv_P, K * d + force - tr
 
 
-@njit(cache=True, error_model="numpy")
-def _advance_lanes_one_by_one(
-    order, dt, substeps, psi, r, z, K, S, inv_P, KT3, inv_T, d0, slope, run, coef, r_power, abs_power, harmonic, trig
+@njit(cache=True, error_model="numpy", inline="always")
+def _sample_constants(constants, gain_scale, time_scale, k):
+    """One lane's constants over sample ``k`` as ``simulate_kernel``'s vector loops form them: K,
+    T1 + T2, 1 / (T1 T2) (inf for nomoto1: unused), K T3 and 1 / T, with the run's ``constants``
+    (K, T1, T2, T3) scaled by its ``gain_scale`` and ``time_scale`` there."""
+    s = time_scale[k]
+    K = constants[0] * gain_scale[k]
+    return (
+        K,
+        (constants[1] + constants[2]) * s,
+        1.0 / (constants[1] * constants[2] * s * s),
+        K * constants[3] * s,
+        1.0 / (constants[1] * s),
+    )
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _rk4_substep(
+    order, dt, sub, substeps, p, q, w, d0, slope, lane_constants, coef, r_power, abs_power, harmonic, trig
 ):
-    """``simulate_kernel``'s step of every lane over one sample, one lane after the other in
-    registers: for a few lanes the vector loops are mostly overhead, and two or three independent
-    chains already fill the processor's pipelines. Same operations in the same order as the vector
-    loops, so the same numbers."""
+    """One lane's RK4 step ``sub`` of ``substeps`` over a sample from the state (p, q, w) = (psi, r,
+    z), the rudder d0 + t slope at the sample's fraction t: the vector loops' operations in their
+    order, so the same numbers."""
     half, whole = 0.5 * dt, 1.0 * dt
-    for lane in range(psi.shape[0]):
-        lane_coef, constants = coef[run[lane]], (K[lane], S[lane], inv_P[lane], KT3[lane], inv_T[lane])
-        p, q, w, a, b = psi[lane], r[lane], z[lane], d0[lane], slope[lane]
+    d_start = d0 + ((sub + 0.0) / substeps) * slope
+    d_mid = d0 + ((sub + 0.5) / substeps) * slope
+    d_end = d0 + ((sub + 1.0) / substeps) * slope
+    s1p, s1r, s1z = _lane_slopes(order, p, q, w, d_start, lane_constants, coef, r_power, abs_power, harmonic, trig)
+    s2p, s2r, s2z = _lane_slopes(
+        order,
+        p + half * s1p,
+        q + half * s1r,
+        w + half * s1z,
+        d_mid,
+        lane_constants,
+        coef,
+        r_power,
+        abs_power,
+        harmonic,
+        trig,
+    )
+    s3p, s3r, s3z = _lane_slopes(
+        order,
+        p + half * s2p,
+        q + half * s2r,
+        w + half * s2z,
+        d_mid,
+        lane_constants,
+        coef,
+        r_power,
+        abs_power,
+        harmonic,
+        trig,
+    )
+    s4p, s4r, s4z = _lane_slopes(
+        order,
+        p + whole * s3p,
+        q + whole * s3r,
+        w + whole * s3z,
+        d_end,
+        lane_constants,
+        coef,
+        r_power,
+        abs_power,
+        harmonic,
+        trig,
+    )
+    p += dt * (s1p + 2 * s2p + 2 * s3p + s4p) / 6
+    q += dt * (s1r + 2 * s2r + 2 * s3r + s4r) / 6
+    w += dt * (s1z + 2 * s2z + 2 * s3z + s4z) / 6
+    return p, q, w
+
+
+@njit(cache=True, error_model="numpy")
+def _advance_lane_pair(
+    order,
+    dt,
+    substeps,
+    lane_a,
+    lane_b,
+    run,
+    first,
+    last,
+    alive,
+    rudder,
+    gain_scale,
+    time_scale,
+    constants,
+    psi,
+    r,
+    z,
+    coef,
+    r_power,
+    abs_power,
+    harmonic,
+    trig,
+    psi_out,
+    r_out,
+):
+    """Two lanes of ``simulate_kernel`` over all their samples, side by side in registers: for a few
+    lanes the vector loops are mostly overhead, and two independent chains interleaved fill the
+    processor's pipelines where one alone waits on each result. ``lane_b`` may be ``lane_a`` (a lane
+    alone). Each lane's steps are the vector loops' operations in their order, so the same numbers."""
+    n = rudder.shape[1]
+    ja, jb = run[lane_a], run[lane_b]
+    coef_a, coef_b = coef[ja], coef[jb]
+    pa, qa, wa = psi[lane_a], r[lane_a], z[lane_a]
+    pb, qb, wb = psi[lane_b], r[lane_b], z[lane_b]
+    live_a, live_b = alive[lane_a], alive[lane_b]
+    for step in range(max(last[lane_a] - first[lane_a], last[lane_b] - first[lane_b]) + 1):
+        if not (live_a or live_b):
+            return
+        ka, kb = min(first[lane_a] + step, last[lane_a]), min(first[lane_b] + step, last[lane_b])
+        constants_a = _sample_constants(constants[ja], gain_scale[ja], time_scale[ja], ka)
+        constants_b = _sample_constants(constants[jb], gain_scale[jb], time_scale[jb], kb)
+        da, db = rudder[ja, ka], rudder[jb, kb]
+        slope_a, slope_b = rudder[ja, min(ka + 1, n - 1)] - da, rudder[jb, min(kb + 1, n - 1)] - db
         for sub in range(substeps):
-            d_start = a + ((sub + 0.0) / substeps) * b
-            d_mid = a + ((sub + 0.5) / substeps) * b
-            d_end = a + ((sub + 1.0) / substeps) * b
-            s1p, s1r, s1z = _lane_slopes(
-                order, p, q, w, d_start, constants, lane_coef, r_power, abs_power, harmonic, trig
-            )
-            s2p, s2r, s2z = _lane_slopes(
+            pa, qa, wa = _rk4_substep(
                 order,
-                p + half * s1p,
-                q + half * s1r,
-                w + half * s1z,
-                d_mid,
-                constants,
-                lane_coef,
+                dt,
+                sub,
+                substeps,
+                pa,
+                qa,
+                wa,
+                da,
+                slope_a,
+                constants_a,
+                coef_a,
                 r_power,
                 abs_power,
                 harmonic,
                 trig,
             )
-            s3p, s3r, s3z = _lane_slopes(
+            pb, qb, wb = _rk4_substep(
                 order,
-                p + half * s2p,
-                q + half * s2r,
-                w + half * s2z,
-                d_mid,
-                constants,
-                lane_coef,
+                dt,
+                sub,
+                substeps,
+                pb,
+                qb,
+                wb,
+                db,
+                slope_b,
+                constants_b,
+                coef_b,
                 r_power,
                 abs_power,
                 harmonic,
                 trig,
             )
-            s4p, s4r, s4z = _lane_slopes(
-                order,
-                p + whole * s3p,
-                q + whole * s3r,
-                w + whole * s3z,
-                d_end,
-                constants,
-                lane_coef,
-                r_power,
-                abs_power,
-                harmonic,
-                trig,
-            )
-            p += dt * (s1p + 2 * s2p + 2 * s3p + s4p) / 6
-            q += dt * (s1r + 2 * s2r + 2 * s3r + s4r) / 6
-            w += dt * (s1z + 2 * s2z + 2 * s3z + s4z) / 6
-        psi[lane], r[lane], z[lane] = p, q, w
+        if live_a:
+            if np.isfinite(pa) and np.isfinite(qa) and abs(qa) <= 1e3:
+                psi_out[ja, ka + 1], r_out[ja, ka + 1] = pa, qa
+                live_a = first[lane_a] + step < last[lane_a]
+            else:
+                live_a = False
+        if live_b:
+            if np.isfinite(pb) and np.isfinite(qb) and abs(qb) <= 1e3:
+                psi_out[jb, kb + 1], r_out[jb, kb + 1] = pb, qb
+                live_b = first[lane_b] + step < last[lane_b]
+            else:
+                live_b = False
 
 
 @njit(cache=True, error_model="numpy")
@@ -348,10 +450,12 @@ def simulate_kernel(
     constants (K, T1, T2, T3) = ``constants[j]``, forcing coefficients ``coef[j]`` and initial states
     ``initial[j, i] = (psi0, r0, rdot0)`` for segment ``bounds[i] = (start, stop)``.
 
-    Every (run, segment) pair is a lane and all lanes advance one sample together: the
-    lanes are independent, so the loops over them run as vector instructions instead of one
-    long chain of dependent operations (several times faster for a window of shooting
-    intervals, or for the runs of a finite-difference Jacobian). Same steps as ``advance``.
+    Every (run, segment) pair is a lane, and the lanes are independent. Up to
+    MOST_LANES_ONE_BY_ONE lanes (the runs of a finite-difference Jacobian on a few shooting
+    intervals) go two at a time over all their samples, their two chains of dependent operations
+    interleaved (``_advance_lane_pair``); more lanes advance one sample together, in loops over the
+    lanes that run as vector instructions (several times faster for a window of many shooting
+    intervals). Same steps as ``advance``.
 
     Parameters
     ----------
@@ -438,6 +542,34 @@ def simulate_kernel(
                 r_out[0],
             )
         return psi_out, r_out
+    if lanes <= MOST_LANES_ONE_BY_ONE:
+        for lane in range(0, lanes, 2):
+            _advance_lane_pair(
+                order,
+                h / substeps,
+                substeps,
+                lane,
+                min(lane + 1, lanes - 1),
+                run,
+                first,
+                last,
+                alive,
+                rudder,
+                gain_scale,
+                time_scale,
+                constants,
+                psi,
+                r,
+                z,
+                coef,
+                r_power,
+                abs_power,
+                harmonic,
+                trig,
+                psi_out,
+                r_out,
+            )
+        return psi_out, r_out
     # per-sample constants of each lane: K, T1 + T2, 1 / (T1 T2), K T3, 1 / T
     K, S, inv_P, KT3, inv_T = (np.empty(lanes), np.empty(lanes), np.empty(lanes), np.empty(lanes), np.empty(lanes))
     d0, slope, d = np.empty(lanes), np.empty(lanes), np.empty(lanes)
@@ -456,60 +588,37 @@ def simulate_kernel(
             inv_T[lane] = 1.0 / (constants[j, 1] * s)
             d0[lane] = rudder[j, k]
             slope[lane] = rudder[j, min(k + 1, n - 1)] - d0[lane]
-        if lanes <= MOST_LANES_ONE_BY_ONE:
-            _advance_lanes_one_by_one(
-                order,
-                dt,
-                substeps,
-                psi,
-                r,
-                z,
-                K,
-                S,
-                inv_P,
-                KT3,
-                inv_T,
-                d0,
-                slope,
-                run,
-                coef,
-                r_power,
-                abs_power,
-                harmonic,
-                trig,
-            )
-        else:
-            for sub in range(substeps):
-                for q in range(4):  # stage q from the state advanced by the previous stage's slope
-                    fraction = (sub + RK4_NODES[q]) / substeps
-                    weight = RK4_NODES[q] * dt
-                    for lane in range(lanes):
-                        d[lane] = d0[lane] + fraction * slope[lane]
-                        if q == 0:
-                            tp[lane], tr[lane], tz[lane] = psi[lane], r[lane], z[lane]
-                        else:
-                            tp[lane] = psi[lane] + weight * stage[q - 1, 0, lane]
-                            tr[lane] = r[lane] + weight * stage[q - 1, 1, lane]
-                            tz[lane] = z[lane] + weight * stage[q - 1, 2, lane]
-                    _forcing_lanes(force, work, tp, tr, lane_coef, r_power, abs_power, harmonic, trig)
-                    for lane in range(lanes):
-                        stage[q, 0, lane] = tr[lane]
-                        if order == 1:
-                            stage[q, 1, lane] = (K[lane] * d[lane] + force[lane] - tr[lane]) * inv_T[lane]
-                            stage[q, 2, lane] = 0.0
-                        else:
-                            stage[q, 1, lane] = (tz[lane] - S[lane] * tr[lane] + KT3[lane] * d[lane]) * inv_P[lane]
-                            stage[q, 2, lane] = K[lane] * d[lane] + force[lane] - tr[lane]
+        for sub in range(substeps):
+            for q in range(4):  # stage q from the state advanced by the previous stage's slope
+                fraction = (sub + RK4_NODES[q]) / substeps
+                weight = RK4_NODES[q] * dt
                 for lane in range(lanes):
-                    psi[lane] += (
-                        dt * (stage[0, 0, lane] + 2 * stage[1, 0, lane] + 2 * stage[2, 0, lane] + stage[3, 0, lane]) / 6
-                    )
-                    r[lane] += (
-                        dt * (stage[0, 1, lane] + 2 * stage[1, 1, lane] + 2 * stage[2, 1, lane] + stage[3, 1, lane]) / 6
-                    )
-                    z[lane] += (
-                        dt * (stage[0, 2, lane] + 2 * stage[1, 2, lane] + 2 * stage[2, 2, lane] + stage[3, 2, lane]) / 6
-                    )
+                    d[lane] = d0[lane] + fraction * slope[lane]
+                    if q == 0:
+                        tp[lane], tr[lane], tz[lane] = psi[lane], r[lane], z[lane]
+                    else:
+                        tp[lane] = psi[lane] + weight * stage[q - 1, 0, lane]
+                        tr[lane] = r[lane] + weight * stage[q - 1, 1, lane]
+                        tz[lane] = z[lane] + weight * stage[q - 1, 2, lane]
+                _forcing_lanes(force, work, tp, tr, lane_coef, r_power, abs_power, harmonic, trig)
+                for lane in range(lanes):
+                    stage[q, 0, lane] = tr[lane]
+                    if order == 1:
+                        stage[q, 1, lane] = (K[lane] * d[lane] + force[lane] - tr[lane]) * inv_T[lane]
+                        stage[q, 2, lane] = 0.0
+                    else:
+                        stage[q, 1, lane] = (tz[lane] - S[lane] * tr[lane] + KT3[lane] * d[lane]) * inv_P[lane]
+                        stage[q, 2, lane] = K[lane] * d[lane] + force[lane] - tr[lane]
+            for lane in range(lanes):
+                psi[lane] += (
+                    dt * (stage[0, 0, lane] + 2 * stage[1, 0, lane] + 2 * stage[2, 0, lane] + stage[3, 0, lane]) / 6
+                )
+                r[lane] += (
+                    dt * (stage[0, 1, lane] + 2 * stage[1, 1, lane] + 2 * stage[2, 1, lane] + stage[3, 1, lane]) / 6
+                )
+                z[lane] += (
+                    dt * (stage[0, 2, lane] + 2 * stage[1, 2, lane] + 2 * stage[2, 2, lane] + stage[3, 2, lane]) / 6
+                )
         for lane in range(lanes):
             k = first[lane] + step
             if alive[lane] and k <= last[lane]:

@@ -55,6 +55,7 @@ class ShootingProblem:
         self.owner = np.full(dataset.n_samples, -1, dtype=np.int64)  # each sample's block, -1 outside
         for i, (a, b) in enumerate(self.blocks):
             self.owner[a:b] = i
+        self._state_layout = None  # ``_state_entries`` of the last columns, with them
 
     @property
     def size(self) -> int:
@@ -95,10 +96,25 @@ class ShootingProblem:
         states : list of tuple
             Each block's (heading rad, yaw rate rad/s, yaw acceleration rad/s^2; 0 for first order).
         """
+        states = np.asarray(x[self.n_params :]).reshape(-1, self.n_state)
+        return self.parameters(x), [(s[0], s[1], s[2] if self.n_state == 3 else 0.0) for s in states]
+
+    def parameters(self, x: np.ndarray) -> dict:
+        """The parameter set of the unknowns ``x``: ``fixed`` with the fitted ones.
+
+        Parameters
+        ----------
+        x : numpy.ndarray
+            The unknowns: the fitted parameters, then each block's state.
+
+        Returns
+        -------
+        dict
+            The parameters (SI units).
+        """
         params = dict(self.fixed)
         params.update(zip(self.names, x[: self.n_params]))
-        states = np.asarray(x[self.n_params :]).reshape(-1, self.n_state)
-        return params, [(s[0], s[1], s[2] if self.n_state == 3 else 0.0) for s in states]
+        return params
 
     def simulate(self, points, substeps: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The blocks' free runs for several unknown vectors (one row each), in one compiled call.
@@ -115,8 +131,9 @@ class ShootingProblem:
         heading, yaw_rate : numpy.ndarray
             (len(points), n) heading (rad) and measured yaw rate (rad/s) of the runs.
         """
-        runs = [self.unpack(x) for x in points]
-        return self.structure.simulate_runs([q for q, _ in runs], self.shots, [i for _, i in runs], substeps)
+        initial = np.zeros((len(points), len(self.blocks), 3))  # a first-order run's yaw acceleration: 0
+        initial[:, :, : self.n_state] = np.array(points)[:, self.n_params :].reshape(len(points), -1, self.n_state)
+        return self.structure.simulate_runs([self.parameters(x) for x in points], self.shots, initial, substeps)
 
     @staticmethod
     def steps(x: np.ndarray) -> np.ndarray:
@@ -214,16 +231,28 @@ class ShootingProblem:
         """
         p = self.n_params
         m, varied = len(chosen), list(chosen)
-        parameter_values = (differences[:m] / (np.array(points)[:, varied].diagonal() - x[varied])[:, None]).T
-        state_values = differences[m:].T / steps[columns[:, p:]]
+        moved = np.array([point[j] for point, j in zip(points, varied)])
+        parameter_values = (differences[:m] / (moved - x[varied])[:, None]).T
         shape = (len(columns), len(x))
         if sparse_matrix:
             values = np.zeros(columns.shape)
             values[:, varied] = parameter_values
-            values[:, p:] = state_values
+            values[:, p:] = differences[m:].T / steps[columns[:, p:]]
             row_starts = np.arange(0, values.size + 1, columns.shape[1])
             return sparse.csr_matrix((values.ravel(), columns.ravel(), row_starts), shape=shape)
         dense = np.zeros(shape)  # the parameters' columns are the first p
         dense[:, varied] = parameter_values
-        np.put_along_axis(dense, columns[:, p:], state_values, axis=1)
+        entries, unknowns = self._state_entries(columns, len(x))
+        dense.reshape(-1)[entries] = differences[m:].ravel() / steps[unknowns]
         return dense
+
+    def _state_entries(self, columns: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+        """Where the state derivatives of the residual rows of ``columns`` go: their flat indices in
+        the dense (rows x ``size``) Jacobian and the unknowns they belong to, both in the order of
+        the differences' state rows (state component by component, each over every residual row);
+        kept for the ``columns`` of the last call, which a search passes at every step."""
+        if self._state_layout is None or self._state_layout[0] is not columns:
+            unknowns = columns[:, self.n_params :].T
+            entries = np.arange(len(columns)) * size + unknowns
+            self._state_layout = (columns, entries.ravel(), unknowns.ravel())
+        return self._state_layout[1], self._state_layout[2]

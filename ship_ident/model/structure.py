@@ -362,7 +362,11 @@ class Structure:
         return psi[0], r[0]
 
     def simulate_runs(
-        self, param_sets: list, dataset: Dataset, initials: list | None = None, substeps: int | None = None
+        self,
+        param_sets: list,
+        dataset: Dataset,
+        initials: list | np.ndarray | None = None,
+        substeps: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``simulate`` for several parameter sets (and initial states) at once, in one compiled call.
 
@@ -374,8 +378,9 @@ class Structure:
             Parameter sets (SI units).
         dataset : Dataset
             The data.
-        initials : list or None
-            Per run, each segment's initial state (as ``simulate``'s ``initial``).
+        initials : list, numpy.ndarray or None
+            Per run, each segment's initial state (as ``simulate``'s ``initial``; an array: runs x
+            segments x 3).
         substeps : int or None
             RK4 steps per sample, shared (default: that of the fastest time constant of all runs).
 
@@ -389,9 +394,12 @@ class Structure:
         substeps = substeps or substeps_for(h, min(self.fastest_time_constant(p) for p in param_sets))
         runs = len(param_sets)
         rudder = np.empty((runs, dataset.n_samples))
-        gain, tscale = np.empty_like(rudder), np.empty_like(rudder)
+        gain, tscale = np.ones_like(rudder), np.ones_like(rudder)  # unless an effect scales with the speed
         for k, p in enumerate(param_sets):
-            rudder[k], gain[k], tscale[k] = self.effective_inputs(p, dataset.time, dataset.rudder, dataset.speed)
+            rudder[k] = self.effective_rudder(p, dataset.time, dataset.rudder)
+            scales = None if dataset.speed is None else self.speed_scales(p, dataset.speed)
+            if scales is not None:
+                gain[k], tscale[k] = scales
         kernels = [self.kernel(p) for p in param_sets]
         coef = np.array([[t.coefficient for t in ts] for _, ts in kernels], dtype=float).reshape(runs, -1)
         ints = [np.array([getattr(t, f) for t in kernels[0][1]], dtype=np.int64) for f in TERM_FIELDS]
@@ -484,15 +492,55 @@ class Structure:
         rudder, gain_scale, time_scale : numpy.ndarray
             The effective rudder (rad) and the per-sample multipliers (dimensionless).
         """
+        scales = None if speed is None else self.speed_scales(params, speed)
+        if scales is None:
+            scales = np.ones(len(time)), np.ones(len(time))
+        return self.effective_rudder(params, time, rudder), *scales
+
+    def effective_rudder(self, params: dict, time: np.ndarray, rudder: np.ndarray) -> np.ndarray:
+        """The rudder angle acting on the hull (rad), after every effect's rudder hook.
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+        time : numpy.ndarray
+            Sample times (s).
+        rudder : numpy.ndarray
+            The measured rudder angle (rad).
+
+        Returns
+        -------
+        numpy.ndarray
+            The effective rudder angle (rad).
+        """
         for effect in self.effects:
             rudder = effect.effective_rudder(time, rudder, params)
-        gain = np.ones(len(time))
-        time_scale = np.ones(len(time))
+        return rudder
+
+    def speed_scales(self, params: dict, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The per-sample multipliers of K and of the time constants, or None when both are 1.
+
+        Each the product of every effect's speed hook (dimensionless).
+
+        Parameters
+        ----------
+        params : dict
+            The model's parameters (SI units).
+        speed : numpy.ndarray
+            The measured speed (m/s).
+
+        Returns
+        -------
+        tuple of numpy.ndarray or None
+            (gain multiplier, time-constant multiplier) per sample, or None.
+        """
+        product = None
         for effect in self.effects:
-            scales = effect.speed_scales(speed, params) if speed is not None else None
+            scales = effect.speed_scales(speed, params)
             if scales is not None:
-                gain, time_scale = gain * scales[0], time_scale * scales[1]
-        return rudder, gain, time_scale
+                product = scales if product is None else (product[0] * scales[0], product[1] * scales[1])
+        return product
 
     def yaw_rate_bias(self, params: dict) -> float:
         """What the yaw-rate sensor reads when the hull does not turn (gyro bias).

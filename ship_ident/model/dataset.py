@@ -12,7 +12,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .noise import SENSOR_RESOLUTION, noise_level
+from .noise import SENSOR_RESOLUTION, median, noise_level
 
 
 class DataError(ValueError):
@@ -143,11 +143,7 @@ class Dataset:
         if self.n_samples < 2:
             return float(self.meta.get("sample_time", 0.1))
         start, stop = max(self.segments, key=lambda s: s[1] - s[0])
-        return (
-            float(np.median(np.diff(self.time[start:stop])))
-            if stop - start > 1
-            else float(np.median(np.diff(self.time)))
-        )
+        return float(median(np.diff(self.time[start:stop]))) if stop - start > 1 else float(median(np.diff(self.time)))
 
     @property
     def duration(self) -> float:

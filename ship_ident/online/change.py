@@ -55,7 +55,7 @@ from ..estimators.shooting import ShootingProblem
 from ..model.dataset import Dataset, cut_segments
 from ..model.effects import slow_time_constant
 from ..model.metrics import effective_sample_fraction
-from ..model.noise import SENSOR_RESOLUTION
+from ..model.noise import SENSOR_RESOLUTION, median
 from ..model.structure import Structure
 
 CONFIRMATIONS = 2  # refits in a row above the ratio before a change is declared
@@ -159,7 +159,7 @@ def block_errors(structure: Structure, params: dict, dataset: Dataset, blocks: t
         One mean square per block, (rad/s)^2; NaN or inf where the free run diverges.
     """
     squared = block_squared_errors(structure, params, dataset, blocks, lead)
-    return np.array([np.median(e) / MEDIAN_OF_CHI2_1 for e in squared])
+    return np.array([median(e) / MEDIAN_OF_CHI2_1 for e in squared])
 
 
 class ChangeDetector:

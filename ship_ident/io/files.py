@@ -203,13 +203,11 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
     count = 0
     for connection, log_time, raw in reader.messages(connections=connections):
         role = role_of[connection.topic]
-        msg = reader.deserialize(raw, connection.msgtype)
-        if role == "imu":
-            samples.extend(imu_samples(msg, log_time * 1e-9))
-        elif role == "velocity":
-            samples.extend(velocity_samples(msg, log_time * 1e-9))
+        if role in ("imu", "velocity"):
+            msg = reader.deserialize(raw, connection.msgtype)
+            samples.extend((imu_samples if role == "imu" else velocity_samples)(msg, log_time * 1e-9))
         else:
-            samples.append(Sample(log_time * 1e-9, role, float(msg.data)))
+            samples.append(Sample(log_time * 1e-9, role, float64_data(raw, reader, connection.msgtype)))
         count += 1
     indexed = sum(c.msgcount for c in connections)
     if count < indexed:
@@ -218,6 +216,21 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
             "messages are readable; re-record or re-export it"
         )
     return samples
+
+
+# A std_msgs/Float64 message in little-endian CDR: the encapsulation header, then the double
+LITTLE_ENDIAN_FLOAT64 = struct.Struct("<4sd")
+LITTLE_ENDIAN_CDR = b"\x00\x01\x00\x00"
+
+
+def float64_data(raw: bytes, reader: AnyReader, msgtype: str) -> float:
+    """The ``data`` of a serialized std_msgs/Float64 message: read straight from a little-endian CDR
+    message (what ROS 2 records on the machines it runs on), else through the bag's deserializer."""
+    if len(raw) == LITTLE_ENDIAN_FLOAT64.size:
+        header, value = LITTLE_ENDIAN_FLOAT64.unpack(raw)
+        if header == LITTLE_ENDIAN_CDR:
+            return value
+    return float(reader.deserialize(raw, msgtype).data)
 
 
 def header_time(msg, log_time: float) -> float:

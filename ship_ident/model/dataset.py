@@ -383,6 +383,8 @@ def resample_signals(
             gaps.append((float(a), float(b)))
             valid &= ~((grid > a) & (grid < b))
     out = {name: on_grid(*signal, grid, sample_time) for name, signal in clean.items()}
+    if not gaps:  # one segment: every grid point kept
+        return grid, out, ((0, len(grid)),), ()
     edges = np.diff(np.concatenate(([0], valid.astype(np.int8), [0])))  # +1 where a run of valid points starts
     keep_idx = np.flatnonzero(valid)
     remap = np.full(len(grid), -1)

@@ -9,10 +9,10 @@ import pytest
 
 from ship_ident.bench.hidden_effects import best_base_errors, draw_case, run_case, true_improvement
 from ship_ident.diagnosis.damping_law import damping_law
-from ship_ident.diagnosis.diagnose import DEFAULT_METHOD, diagnose, free_run, split, windows
+from ship_ident.diagnosis.diagnose import DEFAULT_METHOD, diagnose, free_run, split, undetermined, windows
 from ship_ident.estimators import make_estimator
 from ship_ident.model.simulator import Vessel, simulate
-from ship_ident.model.structure import Structure
+from ship_ident.model.structure import Structure, nomoto_parameters
 
 pytestmark = pytest.mark.slow  # each case simulates and diagnoses a whole recording
 
@@ -181,18 +181,21 @@ def test_a_rudder_delay_half_the_time_constant_on_a_usv_is_found_where_the_fit_w
     assert first.estimate.parameters["K"] == pytest.approx(sim.truth["K"], rel=0.1)
 
 
-def test_a_cubic_damping_on_a_quick_usv_whose_fit_sits_on_the_equal_poles_fold_is_named():
-    """A USV with T1 1.4 s and a cubic damping: cubic_yaw's fit ends with its two poles equal, where
-    nomoto2 does not change to first order when they split. K and alpha stay determined there (the
-    inverse leaves out only the split); the split is what the data do not determine, so cubic_yaw is
-    recommended on nomoto1, K and alpha within 6 % of the truth."""
+def test_a_cubic_damping_on_a_quick_usv_whose_fit_stops_on_the_equal_poles_fold_is_found_across_it():
+    """A USV with T1 1.4 s, T2 0.34 s, T3 1.3 s and a cubic damping: cubic_yaw's Nomoto search stops
+    with its two poles equal, where only their sum and product are determined. Searched on across
+    the fold in the acceleration form, it is named with every parameter determined: K and the time
+    constants within 2 % of the truth, the cubic damping (per unit yaw inertia) within 6 %."""
     _, _, sim = draw_case(1506601801, ("cubic_yaw",))
     result = diagnose(sim.dataset, "nomoto2", (), workers=1)
     first = result.candidates[0]
     assert result.verdict == "missing_effect" and first.effect == "cubic_yaw"
-    assert first.estimate.structure.model == "nomoto1" and set(first.second_order["undetermined"]) == {"T1", "T2"}
-    for name in ("K", "alpha"):
-        assert first.estimate.parameters[name] == pytest.approx(sim.truth[name], rel=0.06), name
+    assert first.estimate.structure.form == "acceleration" and undetermined(first.estimate) == []
+    found, truth = nomoto_parameters(first.estimate.parameters), sim.truth
+    for name in ("K", "T1", "T2", "T3"):
+        assert found[name] == pytest.approx(truth[name], rel=0.02), name
+    inertia = truth["T1"] + truth["T2"]
+    assert first.estimate.parameters["alpha"] == pytest.approx(truth["alpha"] / inertia, rel=0.06)
 
 
 def test_a_usv_fitted_on_its_fold_is_judged_fair_against_its_base_model_refitted_from_the_truth():

@@ -55,9 +55,11 @@ def node_process(env, *parameters):
 LAST_REFIT_TIMEOUT = 120.0  # s of wall time for the node to catch up with the clock
 DIAGNOSIS_TIMEOUT = 300.0  # s of wall time for the node's diagnosis child to answer with a full diagnosis
 REFIT_PERIOD = 5.0  # s, the node's default
-# s: /clock at most two refits and a tick past the node's newest (a refit due while the previous one
-# still runs is skipped, so the next record can be two periods on)
-PLAY_LEAD = 2 * REFIT_PERIOD + REFIT_PERIOD / TICKS_PER_REFIT
+# s: /clock at most a refit period and a tick and a half past the node's newest record, so the next
+# refit (due a period on, started at the first tick past it) is published before the one after it is
+# due: a refit due while the previous one still runs would be skipped and the record flagged
+# refit_overran (WARN, nothing trusted), which on a loaded machine is every record
+PLAY_LEAD = REFIT_PERIOD + 1.5 * REFIT_PERIOD / TICKS_PER_REFIT
 
 
 def played_to_the_end(env, domain_id, path, rate: float, while_running=None, lead=PLAY_LEAD, parameters=()):
@@ -123,10 +125,12 @@ def test_node_converges_to_truth_and_matches_replay(env, domain_id, bag):
     final = final_estimate(listener)
     assert final["stamp"] > 280.0 and final["status"] in ("OK", "WARN"), final["conditions"]
     assert final["parameters"]["K"] == pytest.approx(truth["K"], rel=0.05)
+    trusted = [e for e in listener.estimates if e["status"] == "OK"]
+    assert trusted, f"no estimate was OK; the final one's conditions: {final['conditions']}"
+    assert listener.parameters, f"{len(trusted)} OK estimates, none received on ~/parameters"
     assert listener.parameters[-1].layout.dim[0].label == "K,T1,T2,T3,delta_r,alpha"
     assert any(s.name == "ship_ident: identification" for s in listener.diagnostics)
-    trusted = [e for e in listener.estimates if e["status"] == "OK"]
-    assert trusted and len(listener.parameters) == len(trusted)
+    assert len(listener.parameters) == len(trusted)
     assert [list(m.data) for m in listener.parameters] == [list(e["parameters"].values()) for e in trusted]
     assert len(late) == 1 and list(late[0].data) == list(listener.parameters[-1].data)
     assert late[0].layout.dim[0].label == listener.parameters[-1].layout.dim[0].label

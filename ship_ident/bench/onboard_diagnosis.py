@@ -180,8 +180,9 @@ def replayed(sim, config: OnlineConfig, dds: dict | None = None) -> tuple[list[d
 
 def node_diagnoses(bag: Path, config: OnlineConfig, duration: float, pace: float, domain_id: int, log_dir) -> dict:
     """``bag`` (``duration`` s) played at ``pace`` to the real node configured as ``config``, over DDS
-    on ``domain_id``; the node is shut down after. Returns its diagnoses (``~/diagnosis``) and exit code."""
-    from ..ros.demo import quiet_trip, shut_down
+    on ``domain_id``; the node is shut down after. Returns its diagnoses (``~/diagnosis``), exit code
+    and, when that is not 0, the end of its output."""
+    from ..ros.demo import node_log_tail, quiet_trip, shut_down
 
     node, listener, play = quiet_trip(domain_id, log_dir, bag, pace, *node_parameters(config))
     try:
@@ -189,7 +190,7 @@ def node_diagnoses(bag: Path, config: OnlineConfig, duration: float, pace: float
         listener.spin(10.0)  # the last diagnosis, finished in the child after the bag's end
     finally:
         code, _ = shut_down(node, listener, play)
-    return {"diagnoses": list(listener.diagnoses), "exit_code": code}
+    return {"diagnoses": list(listener.diagnoses), "exit_code": code, "log": node_log_tail(log_dir) if code else ""}
 
 
 def agreement(replay: list[dict], node: list[dict], named_by_s: float) -> dict:
@@ -287,7 +288,9 @@ def run_trip(
     row["replay_wall_seconds"] = wall
     done = [d for d in diagnoses if d["status"] == "done"]
     if node is not None:
-        row["dds"] = dict(agreement(diagnoses, node["diagnoses"], named_by_s), node_exit=node["exit_code"])
+        row["dds"] = dict(
+            agreement(diagnoses, node["diagnoses"], named_by_s), node_exit=node["exit_code"], node_log=node["log"]
+        )
     if kind != "none":
         named = [d for d in done if kind in named_effects(d)]
         row["named_at"] = named[0]["stamp"] if named else None
@@ -380,6 +383,8 @@ def trip_line(row: dict) -> str:
             f"; over DDS named {dds['named_node']} (replay {dds['named_replay']}), added {dds['added_node']} "
             f"(replay {dds['added_replay']}), {100 * dds['same_verdict']:.0f} % same verdicts"
         )
+        if dds["node_exit"]:
+            text += f"; the node exited with {dds['node_exit']}, its output ending:\n{dds['node_log']}"
     return text
 
 

@@ -32,7 +32,7 @@ DOMAIN_IDS = range(146, 150)  # apart from the tests' domains (1..100, 150..199)
 def diagnose_trip(bag: Path, duration: float, pace: float, window: float, period: float, domain_id: int, log_dir):
     """Play ``bag`` (``duration`` s) at ``pace`` to a node diagnosing its ``window`` s window every
     ``period`` s; return the diagnoses it published and the missing_effect WARNs it raised."""
-    from ..ros.demo import quiet_trip, shut_down
+    from ..ros.demo import node_log_tail, quiet_trip, shut_down
 
     node, listener, play = quiet_trip(
         domain_id, log_dir, bag, pace, f"window_length:={window}", f"diagnosis_period:={period}"
@@ -48,6 +48,7 @@ def diagnose_trip(bag: Path, duration: float, pace: float, window: float, period
     done = [d for d in listener.diagnoses if d["status"] == "done"]
     return {
         "node_exit": code,
+        "node_log": node_log_tail(log_dir) if code else "",  # what a node that died said last
         "wall_seconds": wall,
         "last_stamp": listener.estimates[-1]["stamp"] if listener.estimates else float("nan"),
         "diagnoses": len(listener.diagnoses),

@@ -68,14 +68,26 @@ def start_play(env: dict, bag, rate: float, *options: str, **popen) -> subproces
     return subprocess.Popen(command, env=env, **popen)
 
 
+NODE_LOG = "node.log"  # a quiet trip's node output (its ``log_dir``), read back by ``node_log_tail``
+
+
 def quiet_trip(domain_id: int, log_dir, bag, rate: float, *parameters: str):
     """A quiet ``identifier_node`` on simulated time (``use_sim_time`` and ``parameters``,
-    ``name:=value``), a ``Listener`` collecting its outputs and ``bag`` played to it at ``rate``:
-    ``(node, listener, play)``, to be ended with ``shut_down``."""
+    ``name:=value``), its output kept in ``log_dir``/NODE_LOG, a ``Listener`` collecting its
+    outputs and ``bag`` played to it at ``rate``: ``(node, listener, play)``, to be ended with
+    ``shut_down``."""
     env = ros_environment(domain_id, log_dir)
-    node = start_node(env, "use_sim_time:=true", *parameters, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    with open(Path(log_dir) / NODE_LOG, "w") as log:  # the child keeps its own copy of the descriptor
+        node = start_node(env, "use_sim_time:=true", *parameters, stdout=log, stderr=subprocess.STDOUT)
     listener = Listener(domain_id)
     return node, listener, start_play(env, bag, rate, stderr=subprocess.DEVNULL)
+
+
+def node_log_tail(log_dir, lines: int = 12) -> str:
+    """The last ``lines`` lines of a quiet trip's node output (``quiet_trip``), for a node that
+    exited with an error: what it said before it died."""
+    path = Path(log_dir) / NODE_LOG
+    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:]) if path.exists() else ""
 
 
 def stop(process: subprocess.Popen, timeout: float = 5.0):

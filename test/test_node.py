@@ -87,12 +87,31 @@ def played_to_the_end(env, domain_id, path, rate: float, while_running=None, lea
             f"the node's newest refit is at {newest} s of the bag's {end:g} s after {LAST_REFIT_TIMEOUT:g} s"
         )
         assert node.poll() is None
+        assert not zombie_children(node.pid)  # its finished warm-up child reaped, not left to the end
         if while_running is not None:
             while_running(listener)
     finally:
         code, log = shut_down(node, listener)
     assert code == 0, log
     return listener
+
+
+def zombie_children(pid: int) -> list[int]:
+    """The children of process ``pid`` that have exited and not been reaped (state Z in /proc)."""
+    children = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as f:
+            children += [int(c) for c in f.read().split()]
+    zombies = []
+    for child in children:
+        try:
+            with open(f"/proc/{child}/stat") as f:
+                state = f.read().rsplit(")", 1)[1].split()[0]
+        except FileNotFoundError:  # reaped meanwhile
+            continue
+        if state == "Z":
+            zombies.append(child)
+    return zombies
 
 
 def final_estimate(listener):

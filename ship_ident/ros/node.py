@@ -296,6 +296,8 @@ class IdentifierNode(Node):
 
     # --- refits ----------------------------------------------------------
     def _on_tick(self) -> None:
+        if self._warm_up is not None and not self._warm_up.is_alive():  # reaps the finished warm-up child
+            self._warm_up = None
         effects, self._auto_effects = self._auto_effects, None
         if effects is not None:
             result = self.set_parameters([Parameter("effects", Parameter.Type.STRING_ARRAY, list(effects))])[0]
@@ -407,7 +409,7 @@ class IdentifierNode(Node):
         self.destroy_timer(self._timer)
         self._worker.shutdown(wait=True, cancel_futures=True)
         self.diagnosis.close()
-        if self._warm_up.is_alive():
+        if self._warm_up is not None and self._warm_up.is_alive():
             self._warm_up.terminate()
             self._warm_up.join(timeout=5.0)
 

@@ -58,7 +58,9 @@ REFIT_PERIOD = 5.0  # s, the node's default
 # s: /clock at most a refit period and a tick and a half past the node's newest record, so the next
 # refit (due a period on, started at the first tick past it) is published before the one after it is
 # due: a refit due while the previous one still runs would be skipped and the record flagged
-# refit_overran (WARN, nothing trusted), which on a loaded machine is every record
+# refit_overran (WARN, nothing trusted), which on a loaded machine is every record; a refit due as the
+# previous one returns from its publish is still skipped, and the node stalls: the lead then grows by a
+# period (``Listener.pace_by_node``)
 PLAY_LEAD = REFIT_PERIOD + 1.5 * REFIT_PERIOD / TICKS_PER_REFIT
 
 
@@ -76,7 +78,7 @@ def played_to_the_end(env, domain_id, path, rate: float, while_running=None, lea
     try:
         player = Player(listener.node)
         assert player.wait_for_subscribers(20.0)
-        player.play(samples, rate, hold=listener.pace_by_node(lead, LAST_REFIT_TIMEOUT))
+        player.play(samples, rate, hold=listener.pace_by_node(lead, LAST_REFIT_TIMEOUT, skipped=REFIT_PERIOD))
 
         def caught_up():
             return bool(listener.estimates) and listener.estimates[-1]["stamp"] >= end - REFIT_PERIOD

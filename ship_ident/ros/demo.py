@@ -114,6 +114,7 @@ def shut_down(node: subprocess.Popen, listener, *feeders: subprocess.Popen | Non
 
 
 HOLD_CALLBACKS = 5  # the node's outputs a pacing hold processes per /clock stamp (its stream: about one)
+STALL_S = 10.0  # s of wall time without a new record after which a pacing hold takes a skipped refit
 
 
 class Listener:
@@ -180,16 +181,21 @@ class Listener:
         """The stamp (s, node clock) of the newest estimate record received, None before the first."""
         return self.estimates[-1]["stamp"] if self.estimates else None
 
-    def pace_by_node(self, lead, timeout: float):
+    def pace_by_node(self, lead, timeout: float, skipped: float = 0.0):
         """A ``Player.play`` hold that keeps /clock at most ``lead`` s (simulated) past the node's
         newest refit, waiting up to ``timeout`` s of wall time for the node to catch up (and
         processing the node's outputs meanwhile): a node starved of CPU slows the play, not loses
         samples stamped on arrival. ``lead`` is a number, or a function of the listener giving it
-        (a tighter lead while the node publishes at every tick of its timer). Raises TimeoutError
-        saying how far the node got."""
+        (a tighter lead while the node publishes at every tick of its timer). When nothing new has
+        been published for STALL_S s of wall time, the lead grows by ``skipped`` s until the next
+        record: a refit that came due while the previous one was still returning from its publish
+        was skipped, and the next one is due a period later. Raises TimeoutError saying how far
+        the node got."""
+        stalled_at = [None]  # the newest record's stamp when the node last stalled
 
         def allowed() -> float:
-            return lead(self) if callable(lead) else lead
+            extra = skipped if stalled_at[0] is not None and stalled_at[0] == self.newest_refit() else 0.0
+            return (lead(self) if callable(lead) else lead) + extra
 
         def hold(stamp: float) -> None:
             for _ in range(HOLD_CALLBACKS):
@@ -197,6 +203,10 @@ class Listener:
             newest = self.newest_refit()
             if newest is None or stamp - newest <= allowed():
                 return
+            if self.spin(min(STALL_S, timeout), lambda: stamp - self.newest_refit() <= allowed()):
+                return
+            if self.newest_refit() == newest:
+                stalled_at[0] = newest
             if not self.spin(timeout, lambda: stamp - self.newest_refit() <= allowed()):
                 raise TimeoutError(
                     f"the node's newest refit is at {self.newest_refit():g} s, the clock at {stamp:g} s, "

@@ -36,9 +36,9 @@ The bounds are the physical ones narrowed by the data (``Structure.bounds``:
 cubic_yaw keeps the model stable over the turn rates the window reaches). A
 search that has not converged in ``max_iterations`` with its residuals near the
 noise is crawling along a curved valley (T1-T2-T3-alpha of a slow ship took 48
-iterations): with ``explore`` (the online and command-line fits; the diagnosis
-keeps the narrower rule below, its figures were measured with it) it goes on
-with a gentler damping rule for up to twice as many iterations, a nomoto2 one
+iterations; the gain, T1 and cubic damping of a USV on a small zigzag, which
+barely reaches the turn rates where the damping acts, trade along one): it goes
+on with a gentler damping rule for up to twice as many iterations, a nomoto2 one
 with T2 still at the foot of the T2 = T3 valley after a look along that valley
 (``_valley_starts``); a search whose residuals are far above the noise misses
 the motion and ends as it did. A
@@ -380,8 +380,8 @@ class OutputError(Estimator):
     def __init__(self, start: Estimator, max_iterations: int = 30, shooting_s: float = 30.0, explore: bool = True):
         """``explore``: when the regression start missed the time scale, also search from a range of
         main time constants (``fit``), fit a given start's gain, rudder offset and interval
-        states before the starts are compared, and go on with any search that has not converged
-        near the noise (``_refine``)."""
+        states before the starts are compared, and search with T2 held at each start along the
+        T2 = T3 valley (``_along_valley``)."""
         self.start = start
         self.max_iterations = max_iterations
         self.shooting_s = shooting_s
@@ -801,20 +801,15 @@ class OutputError(Estimator):
     def _minimise(self, search: _Search, x0: np.ndarray) -> tuple[LeastSquaresResult, int]:
         """The bounded search from ``x0``, and its iterations; a model that explains the data to near
         its noise but did not converge, crawling along a valley (up the T2 = T3 valley from its
-        foot: jump along it first; anywhere when exploring is on: the diagnosis keeps its figures
-        without), searched on gently (a model that misses the motion, residuals far above the
-        noise, is not helped by more search)."""
+        foot: jump along it first), searched on gently (a model that misses the motion, residuals
+        far above the noise, is not helped by more search)."""
         p = search.problem.n_params
         result = bounded_levenberg_marquardt(
             search.residual, search.jacobian, x0, search.lo, search.hi, self.max_iterations
         )
         iterations = result.iterations
         in_valley_foot = self._in_valley_foot(search.problem.names, result.x[:p])
-        if (
-            not result.success
-            and (in_valley_foot or self.explore)
-            and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun)
-        ):
+        if not result.success and result.fun @ result.fun <= RESCUE_MAX_COST * len(result.fun):
             start, valley_iterations = self._along_valley(search, result.x) if in_valley_foot else (result.x, 0)
             result = bounded_levenberg_marquardt(
                 search.residual,

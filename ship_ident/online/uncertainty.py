@@ -35,6 +35,10 @@ MIN_FRESH_SHARE = 1e-3  # two estimates' difference has at least this share of t
 # Shares of T1 above the estimate at which T2 is held to profile the cost along the T2 = T3 valley
 # (``first_order_valley``): a second pole the window cannot tell from zero may lie far beyond its 95 % end.
 VALLEY_RUNGS = (0.1, 0.2, 0.35, 0.5)
+# The profile's lowest rung holds T2 at this share of the sample time (or at T2's physical floor, when
+# higher): a second pole that fast settles within a sample (5 % of it is left after one), so the samples
+# cannot tell it from none, and a lower rung slides T1 no further (it only costs RK4 substeps).
+UNRESOLVED_POLE_SHARE = 1.0 / 3.0
 PROFILE_CLIMB_CHI2 = 16.0  # a point this far up a profile (4 standard errors) ends its climb
 # Share of the trusted limit on K's or T1's error past which an estimate is first checked along the
 # profile over the cubic damping alpha (``cubic_damping_slides``): gain and damping trade within alpha's error.
@@ -290,12 +294,13 @@ def first_order_valley(estimate, std_errors: dict, estimator, structure, dataset
 
 def valley_slide(estimate, estimator, structure, dataset) -> float:
     """T1's standard error (s) along the T2 = T3 valley, from the profile of the cost over T2
-    (``profile_slides``) with T2 held at its floor and at VALLEY_RUNGS of T1 above the estimate, T3
-    moved with it (T1 + T2 - T3 kept as a start). On a quick USV whose T2 its window cannot resolve
-    the slide can be three times the error at the search's end."""
+    (``profile_slides``) with T2 held at the fastest pole the samples resolve (UNRESOLVED_POLE_SHARE)
+    and at VALLEY_RUNGS of T1 above the estimate, T3 moved with it (T1 + T2 - T3 kept as a start). On
+    a quick USV whose T2 its window cannot resolve the slide can be three times the error at the
+    search's end."""
     parameters = estimate.parameters
     t1, t2, t3 = abs(parameters["T1"]), abs(parameters["T2"]), parameters["T3"]
-    floor = structure.parameter("T2").lower
+    floor = max(structure.parameter("T2").lower, UNRESOLVED_POLE_SHARE * dataset.sample_time)
     rungs = ([[floor]] if t2 > floor else []) + [[share * t1 for share in VALLEY_RUNGS if share * t1 > t2]]
     slides = profile_slides(
         estimate, estimator, structure, dataset, "T2", rungs, ("T1",), lambda v: {"T3": max(t3 + v - t2, 0.0)}

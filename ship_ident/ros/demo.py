@@ -75,10 +75,13 @@ def quiet_trip(domain_id: int, log_dir, bag, rate: float, *parameters: str):
     """A quiet ``identifier_node`` on simulated time (``use_sim_time`` and ``parameters``,
     ``name:=value``), its output kept in ``log_dir``/NODE_LOG, a ``Listener`` collecting its
     outputs and ``bag`` played to it at ``rate``: ``(node, listener, play)``, to be ended with
-    ``shut_down``."""
+    ``shut_down``. The node starts from its declared defaults (the parameter file's values), so a
+    trip needs no checkout of the repository around the package."""
     env = ros_environment(domain_id, log_dir)
     with open(Path(log_dir) / NODE_LOG, "w") as log:  # the child keeps its own copy of the descriptor
-        node = start_node(env, "use_sim_time:=true", *parameters, stdout=log, stderr=subprocess.STDOUT)
+        node = start_node(
+            env, "use_sim_time:=true", *parameters, params_file=None, stdout=log, stderr=subprocess.STDOUT
+        )
     listener = Listener(domain_id)
     return node, listener, start_play(env, bag, rate, stderr=subprocess.DEVNULL)
 

@@ -11,6 +11,7 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
+from ship_ident.io import files
 from ship_ident.io.files import (
     BagWriter,
     Topics,
@@ -21,6 +22,7 @@ from ship_ident.io.files import (
     wrap_angle,
     write_simulation,
 )
+from ship_ident.io.mcap_float64 import float64_messages
 from ship_ident.model.dataset import DataError, join_recordings
 from ship_ident.model.simulator import simulate
 
@@ -207,6 +209,50 @@ def test_ros2_bag_record_style_bag_reads_like_a_rosbags_bag(written, clean_nomot
     for name in ("rudder", "heading", "yaw_rate"):  # epoch stamps: float64 time resolves ~0.2 us
         np.testing.assert_allclose(getattr(data, name), getattr(ours, name), rtol=0, atol=1e-6)
     assert data.speed is None
+
+
+def write_float64_mcap(path, compression, chunked: bool = True, imu_heading: bool = False):
+    """Three Float64 inputs with the mcap library: 256-byte chunks, stamps out of order within a
+    chunk (in order without chunks) and equal across topics (the reader must keep file order at
+    ties); the heading as an Imu topic's type when ``imu_heading``."""
+    msgdef, _ = typestore().generate_msgdef("std_msgs/msg/Float64", ros_version=2)
+    with path.open("wb") as f:
+        writer = McapWriter(f, compression=compression, chunk_size=256, use_chunking=chunked)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema("std_msgs/msg/Float64", "ros2msg", msgdef.encode())
+        imu = writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
+        channels = [
+            writer.register_channel(topic, "cdr", imu if imu_heading and topic == "/usv/heading" else schema)
+            for topic in TOPICS[:3]
+        ]
+        for k in (0, 2, 1, 3, 5, 4, *range(6, 40)) if chunked else range(40):
+            for i, channel in enumerate(channels):
+                data = typestore().serialize_cdr(float64(10 * k + i), "std_msgs/msg/Float64")
+                writer.add_message(channel, k * 10**8, data, k * 10**8)
+        writer.finish()
+
+
+@pytest.mark.parametrize("compression", list(CompressionType), ids=lambda c: c.name.lower())
+def test_a_float64_mcap_reads_as_the_general_reader_reads_it(tmp_path, compression):
+    path = tmp_path / "inputs.mcap"
+    write_float64_mcap(path, compression)
+    with AnyReader([path], default_typestore=typestore()) as reader:
+        general = files._bag_samples(reader, path, Topics())
+    plain = read_samples(path)
+    assert plain == general and len(plain) == 120
+    assert [s.value for s in plain[:6]] == [0.0, 1.0, 2.0, 10.0, 11.0, 12.0]  # by stamp, ties in file order
+
+
+@pytest.mark.parametrize("chunked, imu_heading", [(False, False), (True, True)], ids=["unchunked", "imu_type"])
+def test_a_bag_the_plain_reading_does_not_handle_goes_to_the_general_reader(tmp_path, chunked, imu_heading):
+    path = tmp_path / "inputs.mcap"
+    write_float64_mcap(path, CompressionType.ZSTD, chunked, imu_heading)
+    assert float64_messages(path, set(TOPICS[:3])) is None
+    if imu_heading:
+        with pytest.raises(DataError, match="carries sensor_msgs/msg/Imu, expected std_msgs/msg/Float64"):
+            read_samples(path)
+    else:
+        assert len(read_samples(path)) == 120
 
 
 @pytest.mark.parametrize("fmt", ["rosbag2", "mcap"])

@@ -288,6 +288,30 @@ def test_a_hull_changed_while_coasting_is_found_as_its_rudder_moves_and_restarte
     assert found == 249.5 and abs(changed_at - 240.0) <= 2.0
 
 
+def test_the_quick_test_reads_its_own_span_as_it_reads_the_newest_two_test_lengths():
+    """The watch hands the quick test its own span (``quick_span``) and the newest 2 test lengths
+    only where a change shows: the same ratios and the same change time as on the wider data, on
+    the coasting hull that changes at 240 s."""
+    config = OnlineConfig()
+    structure = config.structure()
+    sim = simulate("random", duration=480.0, seed=31, change=(240.0, LOADED))
+    data = sim.dataset
+    truth = {name: sim.truth[name] for name in structure.parameter_names}
+    reference = Estimate(structure, "truth", truth, dict.fromkeys(truth, 0.0), {}, 0)
+    wide, narrow = (ChangeDetector(config.change_ratio, config.change_test_length, 5.0) for _ in range(2))
+    for detector in (wide, narrow):
+        detector.calibrate(structure, reference, data.slice(600, 2400))
+    span = narrow.quick_span(data.sample_time)
+    assert span < 2 * config.change_test_length
+    outcomes = []
+    for end in (100.0, 200.0, 249.0, 249.5):
+        newest = data.slice(*np.searchsorted(data.time, [end - 2 * config.change_test_length, end]))
+        own = data.slice(*np.searchsorted(data.time, [end - span, end]))
+        outcomes.append((wide.quick_test(structure, newest), narrow.quick_test(structure, own, lambda n=newest: n)))
+    assert all(a == b for a, b in outcomes)
+    assert outcomes[-1][1][1] is not None and all(b[1] is None for _, b in outcomes[:-1])
+
+
 def test_the_followed_gain_carries_the_errors_of_the_hull_held_under_it():
     """K refitted on 40 s of seed 001's loaded hull with the rest held from a reference: the held
     parameters' own errors move it, and its published error says by how much. Hulls drawn within

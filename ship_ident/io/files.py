@@ -30,9 +30,9 @@ import struct
 import tempfile
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.errors import ReaderError
@@ -40,6 +40,10 @@ from rosbags.typesys import Stores, get_typestore
 
 from ..model.dataset import DataError, Dataset, resample_series
 from ..online.samples import ROLES, Sample, Topics
+from .mcap_float64 import float64_messages
+
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
 
 CSV_COLUMNS = ("t", "rudder", "heading", "yaw_rate", "speed")  # speed optional
 # Column names read as each role without --columns (matched case-insensitively, SI units only),
@@ -73,8 +77,9 @@ LATCHED_QOS = Qos(
     avoid_ros_namespace_conventions=False,
 )
 DEFAULT_TOPICS = Topics()  # the node's default topic names
+# What a bag that is not readable raises in the general reader (with rosbags.highlevel's AnyReaderError,
+# imported where the general reader runs: a plain bag is read without it)
 BAD_BAG_ERRORS = (
-    AnyReaderError,
     ReaderError,
     struct.error,
     EOFError,
@@ -161,22 +166,38 @@ def _read_bag_dir(path: Path, topics: Topics) -> list[Sample]:
 
 def _read_bag(paths: list[Path], topics: Topics) -> list[Sample]:
     name = paths[0] if len(paths) == 1 else paths[0].parent
+    plain = _plain_float64_samples(paths, topics)
+    if plain is not None:
+        return plain
+    from rosbags.highlevel import AnyReader, AnyReaderError
+
     try:
         with AnyReader(paths, default_typestore=typestore()) as reader:
             return _bag_samples(reader, name, topics)
     except DataError:
         raise
-    except BAD_BAG_ERRORS as err:
+    except (AnyReaderError, *BAD_BAG_ERRORS) as err:
         raise UnreadableBag(
             f"{name} is not a readable MCAP bag ({err}); it is corrupt or truncated "
             "(an interrupted recording): re-record or re-export it"
         ) from None
 
 
-def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
-    if reader.message_count == 0:
-        raise DataError(f"{name} holds no messages; record the rudder, heading and yaw-rate topics")
-    found = {c.topic: c.msgtype for c in reader.connections}
+def _plain_float64_samples(paths: list[Path], topics: Topics) -> list[Sample] | None:
+    """The samples of a single MCAP file of Float64 inputs read straight from its chunks
+    (``mcap_float64``), or None where the general reader must read the bag: a directory or several
+    files, Imu or velocity topics, anything not plain, an input without a message."""
+    if len(paths) != 1 or not paths[0].is_file() or topics.imu or topics.velocity:
+        return None
+    role_of = {topic: role for role, topic in _wanted_topics(topics).items()}
+    messages = float64_messages(paths[0], set(role_of))
+    if messages is None or not {"rudder", "heading", "yaw_rate"} <= {role_of[m[1]] for m in messages}:
+        return None
+    return [Sample(log_time * 1e-9, role_of[topic], value) for log_time, topic, value in messages]
+
+
+def _wanted_topics(topics: Topics) -> dict[str, str]:
+    """The bag topic read for each role (the Imu and the velocity where set)."""
     wanted = {"rudder": topics.rudder, "speed": topics.speed}
     if topics.imu:
         wanted["imu"] = topics.imu
@@ -184,6 +205,14 @@ def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
         wanted.update(heading=topics.heading, yaw_rate=topics.yaw_rate)
     if topics.velocity:
         wanted["velocity"] = topics.velocity
+    return wanted
+
+
+def _bag_samples(reader: AnyReader, name: Path, topics: Topics) -> list[Sample]:
+    if reader.message_count == 0:
+        raise DataError(f"{name} holds no messages; record the rudder, heading and yaw-rate topics")
+    found = {c.topic: c.msgtype for c in reader.connections}
+    wanted = _wanted_topics(topics)
     missing = [t for role, t in wanted.items() if role != "speed" and t not in found]
     if missing:
         have = ", ".join(f"{t} ({m})" for t, m in sorted(found.items())) or "none"
@@ -381,9 +410,9 @@ def _read_csv(path: Path, chosen: dict[str, str], roles: dict) -> list[Sample]:
 
 
 def _check_not_all_nan(path: Path, samples: list[Sample]) -> None:
+    with_finite = {s.role for s in samples if math.isfinite(s.value)}
     for role in dict.fromkeys(s.role for s in samples):
-        values = [s.value for s in samples if s.role == role]
-        if values and not any(math.isfinite(v) for v in values):
+        if role not in with_finite:
             raise DataError(f"{path}: every {role} sample is NaN or Inf; check the sensor or the export")
 
 

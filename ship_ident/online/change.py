@@ -61,6 +61,7 @@ from ..model.structure import Structure
 CONFIRMATIONS = 2  # refits in a row above the ratio before a change is declared
 SHORT_RATIO_FACTOR = 4.0  # the newest refit period's error must exceed this many times the ratio
 MIN_SHORT_SAMPLES = 20  # the short test's newest samples: at least this many (a median of 20)
+QUICK_SPAN_MARGIN = 5.0  # s of data the quick test reads beyond its run (``quick_span``)
 MEDIAN_OF_CHI2_1 = 0.4549  # median of e^2 / sigma^2 for Gaussian e
 MIN_LEVEL = SENSOR_RESOLUTION**2  # (rad/s)^2: no yaw-rate sensor resolves finer errors
 # The gain test: a newest block mispredicted by more than GAIN_TEST_RATIO (below ``ratio``) also votes
@@ -298,7 +299,25 @@ class ChangeDetector:
             ratio = max(ratio, short)
         return ratio, self._declare(structure, dataset, reference)
 
-    def quick_test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
+    def quick_span(self, sample_time: float) -> float:
+        """Newest data the quick test's error reads (s).
+
+        Its newest ``short`` s (MIN_SHORT_SAMPLES samples at least) and the ``length`` s its run
+        starts before them, with QUICK_SPAN_MARGIN for inputs whose newest samples lag the clock.
+
+        Parameters
+        ----------
+        sample_time : float
+            The grid step (s).
+
+        Returns
+        -------
+        float
+            The span (s).
+        """
+        return self.length + max(self.short, MIN_SHORT_SAMPLES * sample_time) + QUICK_SPAN_MARGIN
+
+    def quick_test(self, structure: Structure, dataset: Dataset, wider=None) -> tuple[float, float | None]:
         """The quick test alone, between refits: the newest ``short`` s against SHORT_RATIO_FACTOR ``ratio``.
 
         The votes of the full test are left as they are: its blocks would barely move between calls.
@@ -308,7 +327,10 @@ class ChangeDetector:
         structure : Structure
             The model.
         dataset : Dataset
-            The newest data (rad, rad/s).
+            The newest data (rad, rad/s), ``quick_span`` s at least.
+        wider : callable or None
+            Returns the newest 2 ``length`` s, where a change that shows is located; asked for only
+            then (None: ``dataset`` holds them).
 
         Returns
         -------
@@ -320,6 +342,9 @@ class ChangeDetector:
         if not self.ratio:
             return math.nan, None
         short = self._short_ratio(structure, dataset)
+        if short > SHORT_RATIO_FACTOR * self.ratio and wider is not None:
+            dataset = wider()
+            short = self._short_ratio(structure, dataset)
         if not short > SHORT_RATIO_FACTOR * self.ratio:
             return short, None
         return short, self._declare(structure, dataset, self._reference(float(dataset.time[-1]), drop=False))

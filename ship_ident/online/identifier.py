@@ -347,8 +347,9 @@ class OnlineIdentifier:
         """Between refits: whether the newest data show a change of the vessel.
 
         At most WATCHES_PER_REFIT times per refit period, the change detector's quick test on the newest
-        2 ``change_test_length`` s, with an accepted estimate in force and no change being followed. A
-        change found restarts the window where it happened and makes a refit due at once.
+        data it reads (``quick_span``; the newest 2 ``change_test_length`` s where a change shows, to
+        locate it), with an accepted estimate in force and no change being followed. A change found
+        restarts the window where it happened and makes a refit due at once.
 
         Parameters
         ----------
@@ -373,9 +374,13 @@ class OnlineIdentifier:
             self._next_watch = self._next_watch + step if now - self._next_watch < step else now + step
             oldest = max(now - min(2 * config.change_test_length, config.window_length), self._window_floor)
             series = {role: self._window[role].array(oldest) for role in ROLES}
+        # the test's own span resampled, the wider one only where a change shows and is located
+        newest = max(now - self._change.quick_span(config.sample_time), oldest)
         try:
-            dataset = _resample(config, series)
-            ratio, changed_at = self._change.quick_test(config.structure(), dataset)
+            dataset = _resample(
+                config, {role: rows[np.searchsorted(rows[:, 0], newest) :] for role, rows in series.items()}
+            )
+            ratio, changed_at = self._change.quick_test(config.structure(), dataset, lambda: _resample(config, series))
         except (DataError, StructureError, ValueError):
             return False
         if changed_at is None:
@@ -666,12 +671,16 @@ def run_schedule(identifier: OnlineIdentifier, samples, diagnosis=None):
     RefitRecord
         Each refit's record, in time order.
     """
+    checked = None  # the stamp the schedule was last checked at
     for sample in samples:
-        if identifier.due(sample.time) or identifier.watch(sample.time):
+        # inputs sampled together share a stamp: a refit or watch there moved the schedule past it,
+        # and neither is due again at that stamp
+        if sample.time != checked and (identifier.due(sample.time) or identifier.watch(sample.time)):
             record = identifier.refit(sample.time)
             if diagnosis is not None:
                 effects = diagnosis.after_refit(record, identifier)
                 if effects is not None:
                     identifier.reconfigure(replace(identifier.config, effects=effects))
             yield record
+        checked = sample.time
         identifier.add(sample)

@@ -406,7 +406,7 @@ def _drift_and_own_error(rows: list) -> tuple[float, float]:
     negative value); (1, 0) without rows."""
     if not rows:
         return 1.0, 0.0
-    y, x = np.array(rows).T
+    y, x = np.fromiter(chain.from_iterable(rows), float, count=2 * len(rows)).reshape(-1, 2).T
     phi_square, sigma_square = float(np.mean(y)), 0.0
     for _ in range(SCATTER_REWEIGHTINGS):
         weight = 1.0 / np.maximum(phi_square + sigma_square * x, 1e-12)

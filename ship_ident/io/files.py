@@ -17,6 +17,10 @@ For the 3-DOF model, the body-fixed velocity comes from a ``nav_msgs/msg/Odometr
 ROS's body frame (x forward, y to port): surge u = linear.x, sway v = -linear.y
 (our v is positive to starboard).
 
+A single MCAP file of Float64 inputs is read straight from its chunks
+(``mcap_float64``: an hour's 10 Hz bag in a quarter of a second); every other bag
+through rosbags, which also words what is wrong with a bag it cannot read.
+
 Every unusable input raises ``DataError`` with one sentence saying what is
 wrong and what to do.
 """

@@ -90,10 +90,11 @@ def windows(sim, length, count, model_effects, step=None):
 
 
 @pytest.mark.slow
-def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
+def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error_and_the_model_resumes_its_evidence():
     """The gyro reads high (named three times in a row: added); then the gyro is recalibrated and a
     wind rises: with gyro_bias in the model the held-out error does not fall in two diagnoses, so
-    auto-add removes it again and does not add it back."""
+    auto-add removes it again and does not add it back. The model back in force goes on from its own
+    three slices (the vessel did not change), and its verdict says the effect was tried."""
     gyro = simulate("random", effects=SEED_EFFECTS + ("gyro_bias",), duration=270.0, seed=1)
     wind = simulate("random", effects=SEED_EFFECTS + ("wind_yaw",), duration=400.0, seed=1)
     with_gyro = SEED_EFFECTS + ("gyro_bias",)
@@ -112,6 +113,8 @@ def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error():
     for d in named_again:  # named again: not added again
         assert diagnosis.finish(d, before) is None
     assert named_again[-1]["verdict"] == "missing_effect" and "auto_add" not in named_again[-1]
+    assert named_again[0]["pooled"]["since"] == "the start" and named_again[0]["pooled"]["slices"] == 4
+    assert "auto-add tried it and removed it again" in named_again[-1]["verdict_sentence"]
 
 
 def test_a_window_that_cannot_support_a_diagnosis_is_skipped_with_the_reason():

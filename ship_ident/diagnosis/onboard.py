@@ -38,8 +38,10 @@ says so. Candidates the pool cannot tell from the named one (removing at least
 named with it as a group, with what would separate them
 (``SIGNATURES``). Among yaw damping laws, whose separate refits differ by their searches, the law
 the windows' fits holding both laws show most often (``damping_laws``) leads, and a rival law it
-does not admit reverses nothing (``_law_lead``). Adding or removing an effect, or a changed vessel,
-starts a new pool.
+does not admit reverses nothing (``_law_lead``). Adding or removing an effect starts the new
+model's pool, or resumes the one it left when it was last in force (the evidence is the model's on
+this vessel: an effect tried and removed again leaves the model's minutes of evidence as they
+were); a changed vessel starts a new pool and drops the pools left.
 
 With ``auto_add_effects``, an effect named in ``auto_add_after`` consecutive diagnoses is added
 to the model; it is kept when, within ``CHECK_DIAGNOSES`` diagnoses of the new model, the pooled
@@ -100,6 +102,7 @@ CERTAIN_T = 2.0 * SIGNIFICANCE_T
 SMALL_SHARE = 0.05
 MIN_WINDOW_S = MIN_HELD_OUT_S / (1.0 - TRAINING_FRACTION)  # s of window that hold out MIN_HELD_OUT_S
 MODEL = "model"  # the model in force, first row of a slice's sums
+VESSEL_CHANGED = "the vessel changed"  # the origin of a pool restarted by a change of the vessel
 
 # What the error each effect removes follows, and the manoeuvre that brings it out: the sentence that says
 # what would separate near-equivalent candidates.
@@ -612,6 +615,7 @@ class OnlineDiagnosis:
         self._vessel_note: str | None = None  # the identifier's last vessel_changed sentence
         self._pool_from = -math.inf  # clock time (s) of the last vessel change: diagnoses due before it are not pooled
         self._asked: tuple | None = None  # effects auto-add asked for (its own change, not an outside one)
+        self._left_pools: dict = {}  # (model, effects) -> the pool's state when that model left
 
     def after_refit(self, record, identifier) -> tuple | None:
         """After a refit: start a due diagnosis, report a finished one, and return any effects to set.
@@ -637,7 +641,7 @@ class OnlineDiagnosis:
         self._take_structure(structure)
         note = record.conditions.get("vessel_changed")
         if note is not None and note != self._vessel_note:
-            self._restart_pool("the vessel changed")
+            self._restart_pool(VESSEL_CHANGED)
             self._pool_from = record.time
         self._vessel_note = note
         now = record.time
@@ -688,6 +692,8 @@ class OnlineDiagnosis:
 
     def _restart_pool(self, origin: str) -> None:
         """Forget the pooled evidence (and the effect it named): ``origin`` says why."""
+        if origin == VESSEL_CHANGED:
+            self._left_pools.clear()
         self._pool = None
         self._origin = origin
         self._held_out_until = -math.inf
@@ -704,7 +710,23 @@ class OnlineDiagnosis:
         self._in_force = structure
 
     def _model_changed(self, structure: tuple) -> None:
+        """A new model is in force: its own pool resumes where it was left, else one starts. The
+        evidence a pool holds is that model's on this vessel, which has not changed since (a change
+        clears the pools left), so a model back in force (an effect auto-add tried and removed)
+        goes on from its evidence, and a candidate that edged ahead in the first slice after the
+        trial does not displace the one its minutes of evidence named."""
+        if self._in_force is not None:
+            self._left_pools[self._in_force] = (
+                self._pool,
+                self._origin,
+                self._held_out_until,
+                self._named,
+                self._laws,
+            )
+        left = self._left_pools.pop(structure, None)
         self._restart_pool(f"{'+'.join(structure[1]) or 'no effects'} came into force")
+        if left is not None and left[0] is not None:
+            self._pool, self._origin, self._held_out_until, self._named, self._laws = left
         if structure[1] != self._asked:
             self._trial = None
             self._rejected.clear()
@@ -776,6 +798,12 @@ class OnlineDiagnosis:
                     else ""
                 )
                 + (f"; {reversal}" if reversal else "")
+                + (
+                    "; auto-add tried it and removed it again (the held-out error did not fall with it): it is "
+                    "not added again until the model is changed from outside"
+                    if found in self._rejected
+                    else ""
+                )
             )
             self._warning = (structure, f"{result['verdict_sentence']}; add it: {result['add_command']}")
         else:

@@ -40,6 +40,26 @@ def test_innovations_of_a_free_run_on_the_noisy_rudder_are_white():
         assert abs(np.corrcoef(white[:-20, i], white[20:, i])[0, 1]) < 0.05
 
 
+def test_the_runs_of_a_jacobian_are_whitened_together_to_the_same_numbers():
+    """Several free runs' errors whitened in one call (two at a time, interleaved) give every run
+    the very residual vector it gets alone, block by block, odd run included."""
+    sim = simulate("zigzag20", noise=NOISE, duration=120.0, seed=3)
+    h, truth = sim.dataset.sample_time, sim.truth
+    kalman = innovation_filter(
+        noise_model(Structure("nomoto2"), truth, h, fit_substeps(h, truth), NOISE.rudder, NOISE.heading, NOISE.yaw_rate)
+    )
+    runs = [dict(truth, K=truth["K"] * (1 + 0.01 * k)) for k in range(5)]
+    psi, r = sim.structure.simulate_runs(runs, sim.dataset)
+    heading_errors, yaw_rate_errors = psi - sim.dataset.heading, r - sim.dataset.yaw_rate
+    n = sim.dataset.n_samples
+    blocks = np.array([[0, n // 3], [n // 3, n]], dtype=np.int64)
+    together = kalman.whiten_blocks_rows(heading_errors, yaw_rate_errors, blocks)
+    alone = [kalman.whiten_blocks(heading_errors[k], yaw_rate_errors[k], blocks) for k in range(5)]
+    assert together.shape == (5, 2 * n)
+    assert all(np.array_equal(together[k], alone[k]) for k in range(5))
+    assert len({float(row[n // 2]) for row in together}) == 5  # the runs differ
+
+
 def test_bound_with_rudder_noise_tends_to_the_known_rudder_bound():
     sim = simulate("zigzag20", noise=0.0, duration=300.0, seed=0)
     exact = true_rudder_record(sim)

@@ -313,6 +313,9 @@ class _Search:
         psi, r = self.problem.simulate(points, substeps)
         psi_err, r_err = psi - dataset.heading, r - dataset.yaw_rate
         finite = np.all(np.isfinite(psi_err), axis=1) & np.all(np.isfinite(r_err), axis=1)
+        if not weighs and len(points) > 1 and hasattr(self.weigh, "rows"):  # one compiled call for all
+            weighed = iter(self.weigh.rows(psi_err[finite], r_err[finite]))
+            return [next(weighed) if finite[k] else None for k in range(len(points))]
         return [
             (weighs[k] if weighs else self.weigh)(psi_err[k], r_err[k]) if finite[k] else None
             for k in range(len(points))

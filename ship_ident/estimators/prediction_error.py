@@ -38,8 +38,25 @@ from __future__ import annotations
 
 import numpy as np
 
-from .innovations import innovation_filter, noise_model
+from .innovations import InnovationFilter, innovation_filter, noise_model
 from .output_error import OutputError
+
+
+class Whitening:
+    """The residual vector of free-run errors: their innovations through ``kalman``, the predictor
+    restarted at each shooting interval's first sample (``InnovationFilter.whiten_blocks``); called
+    on one run's (heading errors rad, yaw-rate errors rad/s), or on the rows of several (``rows``)."""
+
+    def __init__(self, kalman: InnovationFilter, blocks: np.ndarray):
+        self.kalman = kalman
+        self.blocks = blocks
+
+    def __call__(self, psi_err: np.ndarray, r_err: np.ndarray) -> np.ndarray:
+        return self.kalman.whiten_blocks(psi_err, r_err, self.blocks)
+
+    def rows(self, psi_errs: np.ndarray, r_errs: np.ndarray) -> np.ndarray:
+        """The residual vectors of the rows of (runs, N) heading and yaw-rate errors, (runs, 2 N)."""
+        return self.kalman.whiten_blocks_rows(psi_errs, r_errs, self.blocks)
 
 
 class PredictionError(OutputError):
@@ -90,8 +107,7 @@ class PredictionError(OutputError):
         s_delta = dataset.noise_std("rudder", np.radians(0.001))
         kalman = innovation_filter(noise_model(structure, params0, h, fit_substeps(h, params0), s_delta, s_psi, s_r))
 
-        blocks = np.array(intervals, dtype=np.int64).reshape(-1, 2)
-        return (lambda psi_err, r_err: kalman.whiten_blocks(psi_err, r_err, blocks)), kalman.log_det_covariance
+        return Whitening(kalman, np.array(intervals, dtype=np.int64).reshape(-1, 2)), kalman.log_det_covariance
 
     @staticmethod
     def bandwidth(intervals) -> int:

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import ship_ident
-from ship_ident.bench import benchmarks
+from ship_ident.bench import benchmarks, onboard_diagnosis
 from ship_ident.bench.crb import cramer_rao_bound
-from ship_ident.bench.onboard_diagnosis import at_floor
+from ship_ident.bench.onboard_diagnosis import agreement, at_floor, trip_line
 from ship_ident.cli import main
 from ship_ident.estimators import DEFAULT_METHOD
 from ship_ident.model.dataset import Dataset
@@ -106,6 +106,34 @@ def test_onboard_diagnosis_quick_names_a_hidden_rudder_offset_once_and_raises_no
     assert offset["added"] == "rudder_offset" and at_floor(offset, "pooled")
     assert none["hidden"] == "none" and none["done"] >= 3 and none["missing_effect"] == 0
     assert result["skipped"].keys() <= {"the window holds 60 s", "too little excitation"}
+
+
+def test_a_dds_trip_from_which_no_diagnosis_arrived_is_reported_as_silent_not_as_a_disagreement():
+    """The replay named and added a rudder offset; over DDS, one node's diagnoses arrived and agree,
+    another's never came (its estimates did): that trip is counted apart, not as a disagreement."""
+    named = {"status": "done", "verdict": "missing_effect", "candidates": [{"effect": "rudder_offset"}]}
+    added = dict(named, auto_add={"action": "added", "effect": "rudder_offset", "effects": ["rudder_offset"]})
+    replay = [dict(named, stamp=120.0), dict(added, stamp=180.0)]
+    heard = agreement(replay, [dict(named, stamp=121.0), dict(added, stamp=181.0)], 600.0)
+    silent = agreement(replay, [], 600.0)
+    assert heard["agrees"] and heard["same_verdict"] == 1.0 and heard["received"] == 2
+    assert not silent["agrees"] and silent["received"] == 0 and np.isnan(silent["same_verdict"])
+    rows = []
+    for k, dds in enumerate((heard, silent)):
+        row = {"seed": k, "hidden": "rudder_offset", "vessel": "usv(x)", "manoeuvre": "zigzag", "first_named": None}
+        row.update(missing_effect=2, done=2, changes=0, added="rudder_offset", after_add=[], skipped=[])
+        row.update(fair=False, true_improvement=0.0, vessel_kind="usv")
+        row.update(dds=dict(dds, node_exit=0, node_log="", estimates_node=180), diagnosis_cpu_percent=1.0)
+        rows.append(row)
+    assert "no diagnosis reached the listener (180 estimate records did" in trip_line(rows[1])
+    assert {
+        k: onboard_diagnosis.summary(rows)[k] for k in ("dds_trips", "dds_silent", "dds_agree", "dds_same_verdict")
+    } == {
+        "dds_trips": 2,
+        "dds_silent": 1,
+        "dds_agree": 1,
+        "dds_same_verdict": 1.0,
+    }
 
 
 def test_realtime_times_the_replay_of_a_usv_bag_as_a_whole_process(tmp_path):

@@ -20,7 +20,8 @@ vessel's kind (a slow ship's crew gives it ten minutes). Three kinds of trip:
   outcome). A trip **has a halving effect** when some catalogued effect, added to the model fitted
   on the trip's first ``NAMED_BY_S`` s, halves the held-out heading error on the hull's standard
   manoeuvres (10/10 and 20/20 zigzags, 35 deg turning circle; ``hidden_effects.HALVING``); there,
-  the effect the diagnosis on board names first must be one that halves it.
+  the effect the diagnosis on board names first must be one that halves it (what the effect named
+  removes there is printed beside: damping laws a few per cent apart around a half are common).
 
 Per trip:
 
@@ -190,13 +191,19 @@ def node_diagnoses(bag: Path, config: OnlineConfig, duration: float, pace: float
         listener.spin(10.0)  # the last diagnosis, finished in the child after the bag's end
     finally:
         code, _ = shut_down(node, listener, play)
-    return {"diagnoses": list(listener.diagnoses), "exit_code": code, "log": node_log_tail(log_dir) if code else ""}
+    return {
+        "diagnoses": list(listener.diagnoses),
+        "estimates": len(listener.estimates),
+        "exit_code": code,
+        "log": node_log_tail(log_dir) if code else "",
+    }
 
 
 def agreement(replay: list[dict], node: list[dict], named_by_s: float) -> dict:
     """How the node's diagnoses ``node`` agree with the replay's ``replay``: the effect each names
     first by ``named_by_s`` (s) and adds first, and the share of the replay's finished diagnoses
-    whose verdict the node's nearest in time (within half a period) shares."""
+    whose verdict the node's nearest in time (within half a period) shares. A node that published
+    no diagnosis at all (``received``: 0) neither agrees nor disagrees: nothing reached the listener."""
     done_replay = [d for d in replay if d["status"] == "done"]
     done_node = [d for d in node if d["status"] == "done"]
     same = 0
@@ -217,8 +224,9 @@ def agreement(replay: list[dict], node: list[dict], named_by_s: float) -> dict:
         "diagnoses_replay": len(done_replay),
         "diagnoses_node": len(done_node),
         "skipped_node": [d["reason"] for d in node if d["status"] == "skipped"],
-        "same_verdict": same / len(done_replay) if done_replay else float("nan"),
-        "agrees": (named[0] or (0, None))[1] == (named[1] or (0, None))[1] and added[0] == added[1],
+        "received": len(node),
+        "same_verdict": same / len(done_replay) if done_replay and node else float("nan"),
+        "agrees": bool(node) and (named[0] or (0, None))[1] == (named[1] or (0, None))[1] and added[0] == added[1],
     }
 
 
@@ -289,7 +297,10 @@ def run_trip(
     done = [d for d in diagnoses if d["status"] == "done"]
     if node is not None:
         row["dds"] = dict(
-            agreement(diagnoses, node["diagnoses"], named_by_s), node_exit=node["exit_code"], node_log=node["log"]
+            agreement(diagnoses, node["diagnoses"], named_by_s),
+            node_exit=node["exit_code"],
+            node_log=node["log"],
+            estimates_node=node["estimates"],
         )
     if kind != "none":
         named = [d for d in done if kind in named_effects(d)]
@@ -318,9 +329,11 @@ def run_mmg_trip(seed: int, trip_s: float = TRIP_S, named_by_s: float = NAMED_BY
     row["replay_wall_seconds"] = wall
     early = run.dataset.slice(0, int(round(named_by_s / run.dataset.sample_time)))
     judged = diagnose(early, "nomoto2", (), workers=1, validation=mmg.held_out_recordings(hull, seed))
-    row["halving"] = {c.effect: c.improvement_heading for c in judged.candidates if c.improvement_heading >= HALVING}
+    shares = {c.effect: c.improvement_heading for c in judged.candidates}
+    row["halving"] = {effect: share for effect, share in shares.items() if share >= HALVING}
     named = first_named([d for d in diagnoses if d["status"] == "done"], named_by_s)
     row["named_by_deadline"] = named[1] if named else None
+    row["named_share"] = shares.get(named[1], float("nan")) if named else float("nan")
     row["named_halves"] = bool(named and named[1] in row["halving"])
     return row
 
@@ -377,12 +390,21 @@ def trip_line(row: dict) -> str:
         text += f", fair {row['fair']} ({100 * row['true_improvement']:.0f} %)"
     if "halving" in row:
         text += f", halving: {', '.join(f'{n} {100 * v:.0f} %' for n, v in row['halving'].items()) or 'none'}"
+        if row["named_by_deadline"]:
+            text += f"; named by the deadline: {row['named_by_deadline']} ({100 * row['named_share']:.0f} %)"
     if "dds" in row:
         dds = row["dds"]
-        text += (
-            f"; over DDS named {dds['named_node']} (replay {dds['named_replay']}), added {dds['added_node']} "
-            f"(replay {dds['added_replay']}), {100 * dds['same_verdict']:.0f} % same verdicts"
-        )
+        if dds["received"]:
+            text += (
+                f"; over DDS named {dds['named_node']} (replay {dds['named_replay']}), added {dds['added_node']} "
+                f"(replay {dds['added_replay']}), {100 * dds['same_verdict']:.0f} % same verdicts"
+            )
+        else:
+            text += (
+                f"; over DDS no diagnosis reached the listener ({dds['estimates_node']} estimate records did: "
+                + ("the node's diagnoses never came" if dds["estimates_node"] else "nothing of the node came")
+                + ")"
+            )
         if dds["node_exit"]:
             text += f"; the node exited with {dds['node_exit']}, its output ending:\n{dds['node_log']}"
     return text
@@ -397,6 +419,7 @@ def summary(rows: list[dict]) -> dict:
     halving = [r for r in mmg if r["halving"]]
     judged_adds = [r for r in hidden + none if r["after_add"]]
     dds = [r["dds"] for r in rows if "dds" in r]
+    heard = [d for d in dds if d["received"] and np.isfinite(d["same_verdict"])]
     per_kind = {}
     for kind in (*KINDS, "none", "mmg"):
         of_kind = [r for r in rows if r["hidden"] == kind]
@@ -443,11 +466,19 @@ def summary(rows: list[dict]) -> dict:
         "mmg_trips": len(mmg),
         "mmg_with_halving_effect": len(halving),
         "mmg_named_halves": share(halving, "named_halves"),
+        "mmg_missed": [
+            f"{r['named_by_deadline'] or 'nothing'} named"
+            + (f" (it removes {100 * r['named_share']:.0f} %)" if r["named_by_deadline"] else "")
+            + f" on {r['vessel']} (trip seed {r['seed']})"
+            for r in halving
+            if not r["named_halves"]
+        ],
         "mmg_missing_effect_without_halving": sum(r["missing_effect"] for r in mmg if not r["halving"]),
         "mmg_done_without_halving": sum(r["done"] for r in mmg if not r["halving"]),
         "dds_trips": len(dds),
+        "dds_silent": sum(not d["received"] for d in dds),
         "dds_agree": sum(d["agrees"] for d in dds),
-        "dds_same_verdict": float(np.nanmean([d["same_verdict"] for d in dds])) if dds else float("nan"),
+        "dds_same_verdict": float(np.mean([d["same_verdict"] for d in heard])) if heard else float("nan"),
         "skipped": dict(Counter(reason.split(":")[0].split(";")[0] for r in rows for reason in r["skipped"])),
         "diagnosis_cpu_percent": float(np.mean([r["diagnosis_cpu_percent"] for r in rows])),
         "per_kind": per_kind,
@@ -514,12 +545,18 @@ def render(result: dict) -> str:
             f"{percent(result['mmg_named_halves'])} of them (target >= {100 * TARGETS['mmg_named_halves']:.0f} %); "
             f"without one, missing_effect in {result['mmg_missing_effect_without_halving']} of "
             f"{result['mmg_done_without_halving']} diagnoses"
+            + (f"; missed: {'; '.join(result['mmg_missed'])}" if result["mmg_missed"] else "")
         )
     if result["dds_trips"]:
         lines.append(
             f"over DDS to the real node (at {DDS_PACE:g}x): {result['dds_agree']} of {result['dds_trips']} trips name "
             f"and add the same effect as the replay; {percent(result['dds_same_verdict'])} of the diagnoses "
             "give the same verdict"
+            + (
+                f"; from {result['dds_silent']} trips no diagnosis reached the listener (not counted as agreeing)"
+                if result["dds_silent"]
+                else ""
+            )
         )
     lines += [
         f"diagnoses skipped, by reason: {result['skipped'] or 'none'}",

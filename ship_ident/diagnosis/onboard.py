@@ -29,9 +29,10 @@ missing effect the free runs show with certainty), with t >= ``SIGNIFICANCE_T`` 
 (``PooledEvidence.clear_t``), and its training free runs gaining on average
 (``MIN_TRAINING_GAIN``): the rule of ``diagnose`` on more data.
 
-**One name.** Once an effect is named ``missing_effect``, the verdict names it as long as the pool
-holds it (its t stays significant: slices where the effect does not show dilute its share of the
-pooled error but are no evidence against it); another is named only when its pooled error is
+**One name.** Once an effect is named ``missing_effect`` (at t >= ``SIGNIFICANCE_T``), the verdict
+names it as long as the pool holds it (its t stays at ``HOLD_T`` or above: slices where the effect
+does not show dilute its share of the pooled error, and its t, but are no evidence against it, and
+a t wavering about the threshold is the threshold's noise); another is named only when its pooled error is
 significantly below the named one's (t >= ``SIGNIFICANCE_T`` on their loss differential) or the
 named one's evidence is gone while another's holds: the pooled evidence reversed, and the sentence
 says so. Candidates the pool cannot tell from the named one (removing at least
@@ -101,6 +102,7 @@ MIN_SLICE_SAMPLES = 10  # a slice with fewer fresh held-out samples adds nothing
 # (SMALL_SHARE): the gyro's white noise, which no model removes, holds the total near the floor
 CERTAIN_T = 2.0 * SIGNIFICANCE_T
 SMALL_SHARE = 0.05
+HOLD_T = 2.0  # t a named effect keeps its name down to (named at SIGNIFICANCE_T)
 MIN_WINDOW_S = MIN_HELD_OUT_S / (1.0 - TRAINING_FRACTION)  # s of window that hold out MIN_HELD_OUT_S
 MODEL = "model"  # the model in force, first row of a slice's sums
 VESSEL_CHANGED = "the vessel changed"  # the origin of a pool restarted by a change of the vessel
@@ -429,10 +431,12 @@ class PooledEvidence:
         return bool(self.t_statistic(MODEL, name) >= SIGNIFICANCE_T)
 
     def holds(self, name: str) -> bool:
-        """The pooled evidence still points to ``name``: its t is significant (``clear_t``) and it
-        removes some of the error. (Slices where its effect does not show dilute its share of the
-        pooled error, and its t a little, but are no evidence against it.)"""
-        return bool(self.improvement(name) > 0 and self.clear_t(name))
+        """The pooled evidence still points to ``name``, named before: it removes some of the error
+        at t >= ``HOLD_T``. Slices where its effect does not show dilute its share of the pooled
+        error, and its t, but are no evidence against it: named at t 3, a t wavering between 2 and 3
+        is the threshold's own noise (a tanker's hidden rudder offset, held only at t 3, changed its
+        name four times in one trip as its t crossed 3 and back)."""
+        return bool(self.improvement(name) > 0 and self.t_statistic(MODEL, name) >= HOLD_T)
 
     def significant(self, name: str) -> bool:
         """``name`` removes a significant share of the pooled error: enough of it (``removes_enough``)

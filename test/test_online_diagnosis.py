@@ -169,18 +169,23 @@ def drawn_diagnosis(
     names = ["model", *left]
     rows = [noise + missed] + [noise + left[name] for name in left]
     piece = slice_sums(stamp - 60.0 + SLICE, 0.1, names, rows, [0.0] + [training_gain] * len(left), NOISE)
+    return finished(stamp, piece, window_s, held_out_error=float(np.sqrt(np.mean(rows[0] ** 2))), noise_floor=NOISE)
+
+
+def finished(stamp: float, piece: dict, window_s: float, **figures) -> dict:
+    """A finished diagnosis of nomoto2 without effects at ``stamp`` (s), its held-out slice's sums
+    ``piece`` (its candidates the slice's rows after the model's), its window ``window_s`` (s) long."""
     return {
         "stamp": stamp,
         "status": "done",
         "structure": {"model": "nomoto2", "effects": []},
         "verdict": "unexplained",
         "verdict_sentence": "",
-        "candidates": [{"effect": name, "significant": False, "evidence": "drawn"} for name in left],
-        "held_out_error": float(np.sqrt(np.mean(rows[0] ** 2))),
-        "noise_floor": NOISE,
+        "candidates": [{"effect": name, "significant": False, "evidence": "drawn"} for name in piece["names"][1:]],
         "pinned": [],
         "held_out_slice": piece,
         "window": {"start": stamp - window_s + 0.1, "end": stamp},
+        **figures,
     }
 
 
@@ -436,17 +441,7 @@ def test_a_tankers_named_rudder_offset_keeps_its_name_while_its_t_wavers_below_t
         piece = {"start": stamp - 60.0, "end": stamp, "samples": samples, "seconds": 60.0, "squares": squares}
         piece.update(names=["model", "rudder_offset", "course_instability"], pair_variance=variance.tolist())
         piece.update(training_gain=[0.0, 0.2 * samples, 0.2 * samples], noise_squares=samples * model / 9.0)
-        return {
-            "stamp": stamp,
-            "status": "done",
-            "structure": {"model": "nomoto2", "effects": []},
-            "verdict": "unexplained",
-            "verdict_sentence": "",
-            "candidates": [{"effect": n, "significant": False, "evidence": "drawn"} for n in piece["names"][1:]],
-            "pinned": [],
-            "held_out_slice": piece,
-            "window": {"start": stamp - 600.0, "end": stamp},
-        }
+        return finished(stamp, piece, 600.0)
 
     config = OnlineConfig(effects=(), window_length=600.0)
     diagnosis = OnlineDiagnosis()

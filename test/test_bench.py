@@ -13,7 +13,7 @@ import pytest
 import ship_ident
 from ship_ident.bench import benchmarks, onboard_diagnosis
 from ship_ident.bench.crb import cramer_rao_bound
-from ship_ident.bench.onboard_diagnosis import agreement, at_floor, trip_line
+from ship_ident.bench.onboard_diagnosis import agreement, at_floor, median_shares, trip_line
 from ship_ident.cli import main
 from ship_ident.estimators import DEFAULT_METHOD
 from ship_ident.model.dataset import Dataset
@@ -106,6 +106,26 @@ def test_onboard_diagnosis_quick_names_a_hidden_rudder_offset_once_and_raises_no
     assert offset["added"] == "rudder_offset" and at_floor(offset, "pooled")
     assert none["hidden"] == "none" and none["done"] >= 3 and none["missing_effect"] == 0
     assert result["skipped"].keys() <= {"the window holds 60 s", "too little excitation"}
+
+
+def test_a_tankers_judge_takes_the_median_share_of_three_training_spans_so_one_fit_decides_nothing():
+    """An MMG tanker's shares of the turning circle's heading error on 540, 600 and 660 s of its random
+    steps: the course instability removes 51, 49 and 62 %, a half by its median, not by the 600 s fit
+    alone; the cubic law's fit on 660 s failed (it scores 0 there, as a candidate not fitted does) and
+    its median is its 540 s share; the speed dependence, not fitted on 540 s, counts 0 there."""
+    by_span = [
+        {"course_instability": 0.515, "cubic_yaw": 0.415},
+        {"course_instability": 0.489, "cubic_yaw": 0.684, "speed_dependence": 0.58},
+        {"course_instability": 0.62, "cubic_yaw": 0.0, "speed_dependence": 0.233},
+    ]
+    shares = median_shares(by_span)
+    assert shares == {"course_instability": 0.515, "cubic_yaw": 0.415, "speed_dependence": 0.233}
+    assert list(shares) == ["course_instability", "cubic_yaw", "speed_dependence"]
+    row = {"seed": 1, "hidden": "mmg", "vessel": "KVLCC2(x)", "manoeuvre": "steps", "first_named": "300 s"}
+    row.update(missing_effect=3, done=9, changes=0, added=None, after_add=[], named_by_deadline="course_instability")
+    row.update(halving={"course_instability": 0.515}, named_share=0.515, judge_spans_seconds=[540.0, 600.0, 660.0])
+    row["judge_shares"] = {effect: [s.get(effect, 0.0) for s in by_span] for effect in shares}
+    assert "course_instability (52 %: 52, 49, 62 % fitted on 540, 600, 660 s)" in trip_line(row)
 
 
 def test_a_dds_trip_from_which_no_diagnosis_arrived_is_reported_as_silent_not_as_a_disagreement():

@@ -22,6 +22,11 @@ vessel's kind (a slow ship's crew gives it ten minutes). Three kinds of trip:
   manoeuvres (10/10 and 20/20 zigzags, 35 deg turning circle; ``hidden_effects.HALVING``); there,
   the effect the diagnosis on board names first must be one that halves it (what the effect named
   removes there is printed beside: damping laws a few per cent apart around a half are common).
+  The share is the median of three fits, on the first ``NAMED_BY_S`` s and one diagnosis period
+  less and more (``JUDGE_SPANS_S``, each printed): a Nomoto model fitted to an MMG hull's random
+  steps and run free over a 200 s turning circle integrates a small error of its steady turn rate,
+  so one fit's share moves by up to a quarter of the error with a minute more or less of training
+  data, and a fit that fails scores 0 (``median_shares``).
 
 Per trip:
 
@@ -75,6 +80,7 @@ AFTER_ADD = 2  # diagnoses after an add within which the error must reach the fl
 COUNT, NONE_COUNT, MMG_COUNT = 30, 30, 10  # trips of each kind by default
 DDS_PACE = 1.0  # x real time: the diagnosis child keeps the pace a boat gives it (faster, a loaded machine starves it)
 DDS_DOMAIN_IDS = range(200, 205)  # apart from the tests' (1..100, 150..199) and the other benches' (101..149)
+JUDGE_SPANS_S = (-PERIOD_S, 0.0, PERIOD_S)  # s about named_by_s: the MMG judge's training spans
 QUICK = {"count": 1, "none_trips": 1, "trip_s": 420.0, "named_by_s": 360.0}
 TARGETS = {"named_in_time": 0.9, "at_floor_after_add": 0.9, "none_missing_effect": 0.05, "mmg_named_halves": 0.9}
 
@@ -318,8 +324,8 @@ def run_trip(
 def run_mmg_trip(seed: int, trip_s: float = TRIP_S, named_by_s: float = NAMED_BY_S) -> dict:
     """One trip of random rudder steps on an MMG hull drawn from ``seed``, replayed with the
     diagnosis on board; whether some catalogued effect halves the held-out heading error of the
-    model fitted on the trip's first ``named_by_s`` s on the hull's standard manoeuvres, and whether
-    the effect named first on board does."""
+    model fitted on the trip's first ``named_by_s`` s on the hull's standard manoeuvres (the median
+    of the fits on ``JUDGE_SPANS_S`` about it), and whether the effect named first on board does."""
     from . import mmg
 
     hull = mmg.random_hull(np.random.default_rng(seed))
@@ -327,15 +333,30 @@ def run_mmg_trip(seed: int, trip_s: float = TRIP_S, named_by_s: float = NAMED_BY
     diagnoses, duration, wall, _ = replayed(run, trip_config(MMG_KIND))
     row = trip_row(seed, "mmg", hull.name, "steps", diagnoses, duration)
     row["replay_wall_seconds"] = wall
-    early = run.dataset.slice(0, int(round(named_by_s / run.dataset.sample_time)))
-    judged = diagnose(early, "nomoto2", (), workers=1, validation=mmg.held_out_recordings(hull, seed))
-    shares = {c.effect: c.improvement_heading for c in judged.candidates}
+    validation = mmg.held_out_recordings(hull, seed)
+    by_span = []
+    for offset in JUDGE_SPANS_S:
+        early = run.dataset.slice(0, int(round((named_by_s + offset) / run.dataset.sample_time)))
+        judged = diagnose(early, "nomoto2", (), workers=1, validation=validation)
+        by_span.append({c.effect: c.improvement_heading for c in judged.candidates})
+    shares = median_shares(by_span)
+    row["judge_spans_seconds"] = [named_by_s + offset for offset in JUDGE_SPANS_S]
+    row["judge_shares"] = {effect: [s.get(effect, 0.0) for s in by_span] for effect in shares}
     row["halving"] = {effect: share for effect, share in shares.items() if share >= HALVING}
     named = first_named([d for d in diagnoses if d["status"] == "done"], named_by_s)
     row["named_by_deadline"] = named[1] if named else None
     row["named_share"] = shares.get(named[1], float("nan")) if named else float("nan")
     row["named_halves"] = bool(named and named[1] in row["halving"])
     return row
+
+
+def median_shares(by_span: list[dict]) -> dict:
+    """Each effect's share of the held-out heading error removed, the median over the judge's fits
+    on its training spans (``by_span``: one ``{effect: share}`` per span; an effect a fit lacks
+    scores 0 there), best first."""
+    effects = {effect for shares in by_span for effect in shares}
+    medians = {effect: float(np.median([shares.get(effect, 0.0) for shares in by_span])) for effect in effects}
+    return dict(sorted(medians.items(), key=lambda item: -item[1]))
 
 
 def share(rows: list[dict], key: str) -> float:
@@ -391,7 +412,12 @@ def trip_line(row: dict) -> str:
     if "halving" in row:
         text += f", halving: {', '.join(f'{n} {100 * v:.0f} %' for n, v in row['halving'].items()) or 'none'}"
         if row["named_by_deadline"]:
-            text += f"; named by the deadline: {row['named_by_deadline']} ({100 * row['named_share']:.0f} %)"
+            spans = ", ".join(f"{100 * v:.0f}" for v in row["judge_shares"].get(row["named_by_deadline"], []))
+            seconds = ", ".join(f"{s:.0f}" for s in row["judge_spans_seconds"])
+            text += (
+                f"; named by the deadline: {row['named_by_deadline']} ({100 * row['named_share']:.0f} %: "
+                f"{spans} % fitted on {seconds} s)"
+            )
     if "dds" in row:
         dds = row["dds"]
         if dds["received"]:

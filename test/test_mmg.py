@@ -254,3 +254,14 @@ def test_a_benchmarks_own_counts_apply_to_it_alone(capsys):
     assert capsys.readouterr().err.strip().endswith("--mmg-trips does not apply to speed")
     assert main(["bench", "onboard-diagnosis", "--none-trips", "-1"]) == 2
     assert "--none-trips must be >= 0, got -1" in capsys.readouterr().err
+
+
+def test_an_mmg_only_draw_takes_count_0_and_a_draw_of_nothing_is_refused(capsys):
+    """``--count 0`` draws no hidden-effect trip where the benchmark draws trips of other kinds (an
+    MMG-only draw); with every count 0 nothing is drawn: one line and exit code 2, as ``--count 0``
+    is for a benchmark with one kind of case."""
+    args = ["bench", "onboard-diagnosis", "--count", "0", "--none-trips", "0", "--mmg-trips", "0"]
+    assert main(args) == 2
+    assert capsys.readouterr().err.strip().endswith("no trips to draw: --count, --none-trips and --mmg-trips are all 0")
+    assert main(["bench", "vessels", "--count", "0"]) == 2
+    assert "--count must be >= 1, got 0" in capsys.readouterr().err

@@ -26,7 +26,8 @@ vessel's kind (a slow ship's crew gives it ten minutes). Three kinds of trip:
   less and more (``JUDGE_SPANS_S``, each printed): a Nomoto model fitted to an MMG hull's random
   steps and run free over a 200 s turning circle integrates a small error of its steady turn rate,
   so one fit's share moves by up to a quarter of the error with a minute more or less of training
-  data, and a fit that fails scores 0 (``median_shares``).
+  data, and a fit that fails scores 0 (``median_shares``). ``--count 0 --none-trips 0`` draws MMG
+  trips alone.
 
 Per trip:
 
@@ -378,11 +379,13 @@ def run(
     rng = np.random.default_rng(seed)
     trip_s = QUICK["trip_s"] if quick else TRIP_S
     named_by_s = QUICK["named_by_s"] if quick else NAMED_BY_S
-    count = count or (QUICK["count"] if quick else COUNT)
+    count = (QUICK["count"] if quick else COUNT) if count is None else count
     none_trips = (QUICK["none_trips"] if quick else NONE_COUNT) if none_trips is None else none_trips
     mmg_trips = (0 if quick else MMG_COUNT) if mmg_trips is None else mmg_trips
     plan = [(KINDS[k % len(KINDS)], k) for k in range(count)] + [("none", k) for k in range(none_trips)]
     plan += [("mmg", k) for k in range(mmg_trips)]
+    if not plan:
+        raise ValueError("no trips to draw: --count, --none-trips and --mmg-trips are all 0")
     rows = []
     for n, (kind, k) in enumerate(plan):
         trip_seed = int(rng.integers(2**31))
@@ -546,24 +549,33 @@ def render(result: dict) -> str:
         f"onboard-diagnosis, seed {result['seed']}: {result['trips']} trips of {result['trip_seconds'] / 60:g} min "
         f"replayed with a diagnosis every {PERIOD_S:g} s and auto-add",
     )
-    lines = [
-        f"hidden effect named missing_effect within {minutes:g} min: {percent(result['named_in_time'])} of "
-        f"{result['fair']} fair trips of {result['hidden_trips']} (named first: "
-        f"{percent(result['named_first_in_time'])}; target >= {100 * TARGETS['named_in_time']:.0f} %)"
-        + (f"; missed: {'; '.join(result['missed'])}" if result["missed"] else ""),
+    changes = (
         f"changes of the named effect per trip: at most {result['max_changes']} "
-        f"({result['trips_with_more_than_one_change']} trips with more than one; target: at most one)",
-        f"after an add (auto-add, {result['adds_judged']} trips judged; the hidden effect added in "
-        f"{result['added_hidden']}): held-out error within {NOISE_MARGIN:g} times the noise floor within "
-        f"{AFTER_ADD} diagnoses in {percent(result['at_floor_after_add'])} pooled since the add "
-        f"({percent(result['at_floor_after_add_window'])} on a window's own; target >= "
-        f"{100 * TARGETS['at_floor_after_add']:.0f} %)",
-        f"trips with nothing hidden: {result['none_trips']} "
-        f"({', '.join(f'{k} {n}' for k, n in sorted(result['none_by_vessel'].items()))}; "
-        f"{result['none_steady']} on steady legs or turns), missing_effect in {result['none_missing_effect']} of "
-        f"{result['none_done']} diagnoses ({100 * result['none_missing_effect_per_diagnosis']:.1f} %; target <= "
-        f"{100 * TARGETS['none_missing_effect']:.0f} %)",
-    ]
+        f"({result['trips_with_more_than_one_change']} trips with more than one; target: at most one)"
+    )
+    lines = [changes]
+    if result["hidden_trips"]:
+        lines[:0] = [
+            f"hidden effect named missing_effect within {minutes:g} min: {percent(result['named_in_time'])} of "
+            f"{result['fair']} fair trips of {result['hidden_trips']} (named first: "
+            f"{percent(result['named_first_in_time'])}; target >= {100 * TARGETS['named_in_time']:.0f} %)"
+            + (f"; missed: {'; '.join(result['missed'])}" if result["missed"] else "")
+        ]
+        lines.append(
+            f"after an add (auto-add, {result['adds_judged']} trips judged; the hidden effect added in "
+            f"{result['added_hidden']}): held-out error within {NOISE_MARGIN:g} times the noise floor within "
+            f"{AFTER_ADD} diagnoses in {percent(result['at_floor_after_add'])} pooled since the add "
+            f"({percent(result['at_floor_after_add_window'])} on a window's own; target >= "
+            f"{100 * TARGETS['at_floor_after_add']:.0f} %)"
+        )
+    if result["none_trips"]:
+        lines.append(
+            f"trips with nothing hidden: {result['none_trips']} "
+            f"({', '.join(f'{k} {n}' for k, n in sorted(result['none_by_vessel'].items()))}; "
+            f"{result['none_steady']} on steady legs or turns), missing_effect in {result['none_missing_effect']} of "
+            f"{result['none_done']} diagnoses ({100 * result['none_missing_effect_per_diagnosis']:.1f} %; target <= "
+            f"{100 * TARGETS['none_missing_effect']:.0f} %)"
+        )
     if result["mmg_trips"]:
         lines.append(
             f"MMG trips: {result['mmg_trips']}, {result['mmg_with_halving_effect']} with an effect that halves the "

@@ -1,6 +1,7 @@
 """The bad-input catalogue of docs/reliability.md: replay's one-line errors, heading wraps, and that
 every test the catalogue names exists."""
 
+import os
 import re
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from ship_ident.io.files import Sample
 from ship_ident.model.simulator import simulate
 from ship_ident.online.config import OnlineConfig
 from ship_ident.online.identifier import OnlineIdentifier, run_schedule
+from ship_ident.online.samples import dataset_samples
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -56,3 +58,35 @@ def test_every_test_the_catalogue_names_exists():
     for module, test in named:
         source = (ROOT / "test" / f"{module}.py").read_text()
         assert f"def {test}(" in source, f"{module}::{test}"
+
+
+def test_a_refit_that_waited_behind_a_slow_one_keeps_the_window(tmp_path, monkeypatch):
+    """A real node (its own context and ROS domain, never spun) takes 90 s of a USV's samples stamped up
+    to its clock's present, as a worker starved of CPU finds them when a refit its timer submitted
+    1.5 s earlier finally runs. The refit reads the clock then: the window stays and is fitted, no
+    clock jump. Handed the tick's time instead, the identifier reads a clock stepping back beyond
+    ``clock_jump_threshold`` (a bag looping) and empties the window."""
+    rclpy = pytest.importorskip("rclpy")
+    node_module = pytest.importorskip("ship_ident.ros.node")
+    monkeypatch.setenv("ROS_LOG_DIR", str(tmp_path))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    sim = simulate("random", "seed001", duration=90.0, seed=31)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=150 + (os.getpid() + 3) % 50)
+    try:
+        node = node_module.IdentifierNode(context=context)
+        try:
+            present = node._now()
+            for sample in dataset_samples(sim.dataset):
+                node._take(Sample(present - sim.dataset.time[-1] + sample.time, sample.role, sample.value))
+            tick = present - 1.5
+            node._refit()
+            assert node.identifier.counts["clock_jumps"] == 0
+            assert node.identifier.window_dataset(node._now()).n_samples > 800
+            stale = node.identifier.refit(tick)
+            assert "clock_jump" in stale.conditions and "no_data" in stale.conditions
+        finally:
+            node.shutdown()
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)

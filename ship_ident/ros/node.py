@@ -306,7 +306,7 @@ class IdentifierNode(Node):
         now = self._now()
         if not self.identifier.due(now):
             if all(job is None or job.done() for job in (self._running, self._watching)):
-                self._watching = self._worker.submit(self._watch, now)
+                self._watching = self._worker.submit(self._watch)
             return
         if self._running is not None and not self._running.done():
             self.identifier.skip(now)
@@ -317,21 +317,28 @@ class IdentifierNode(Node):
             self._type_problems = self._check_topic_types()
         except Exception as exc:  # a graph query must never stop the node
             self._report_callback_error(exc)
-        self._running = self._worker.submit(self._refit, now)
+        self._running = self._worker.submit(self._refit)
 
-    def _watch(self, now: float) -> None:
+    def _watch(self) -> None:
         """Worker thread: between refits, the quick change test (``OnlineIdentifier.watch``, rate
-        limited there); a change found is refitted and published at once."""
+        limited there) at the clock's time when it runs; a change found is refitted and published at once."""
         try:
-            changed = self.identifier.watch(now)
+            changed = self.identifier.watch(self._now())
         except Exception as exc:  # a watch must never stop the node
             self.get_logger().error(f"change watch failed: {type(exc).__name__}: {exc}")
             return
         if changed:
-            self._refit(now)
+            self._refit()
 
-    def _refit(self, now: float) -> None:
-        """Worker thread: refit and publish; any failure is reported, never raised."""
+    def _refit(self) -> None:
+        """Worker thread: refit at the clock's time when the job runs, and publish; any failure is
+        reported, never raised.
+
+        A job that waited behind a slow one (a starved CPU) runs after samples stamped later than the
+        tick that submitted it: handed the tick's time, the identifier would read a clock stepping
+        back by more than ``clock_jump_threshold`` (a bag looping) and empty the window.
+        """
+        now = self._now()
         try:
             with self._stall_lock:  # read as the refit counts its rejected samples: a long fit overlaps
                 stalled, self._stalled = self._stalled, 0  # the next period's messages

@@ -98,7 +98,7 @@ def test_auto_add_removes_an_effect_that_does_not_cut_the_held_out_error_and_the
     gyro = simulate("random", effects=SEED_EFFECTS + ("gyro_bias",), duration=270.0, seed=1)
     wind = simulate("random", effects=SEED_EFFECTS + ("wind_yaw",), duration=400.0, seed=1)
     with_gyro = SEED_EFFECTS + ("gyro_bias",)
-    before = OnlineConfig(window_length=90.0, auto_add_effects=True, auto_add_after=3)
+    before = OnlineConfig(auto_add_effects=True, auto_add_after=3)
     after = before.changed(effects=with_gyro)
     diagnosis = OnlineDiagnosis()
     named = windows(gyro, 90.0, 3, SEED_EFFECTS)
@@ -508,23 +508,3 @@ def test_a_tankers_damping_laws_the_data_cannot_tell_apart_are_named_by_norrbins
         assert {"quadratic_yaw", "cubic_yaw", "course_instability"} - {named[told]} <= set(result["near_equivalent"])
     assert named == {False: "quadratic_yaw", True: "course_instability"}
     assert "Norrbin's law" in sentences[True] and "Norrbin's law" not in sentences[False]
-
-
-def test_a_tankers_first_short_windows_name_nothing_until_the_pool_holds_a_full_windows_fits():
-    """A tanker with a ten-minute window: its first diagnoses hold out fits on two, three and four
-    minutes of it. An effect they show clearly (t beyond 3 from the first slice) is named only once
-    the slices' window shares sum to a full window (at 5 minutes: 0.2 + 0.3 + 0.4 + 0.5), and the
-    verdicts before say what is significant so far and why it waits."""
-    config = OnlineConfig(effects=(), window_length=600.0)
-    rng = np.random.default_rng(3)
-    diagnosis = OnlineDiagnosis()
-    verdicts = []
-    for stamp in (120.0, 180.0, 240.0, 300.0, 360.0):
-        result = drawn_diagnosis(stamp, swell(20.0, 3.0), {"rudder_offset": swell(20.0, 0.5)}, rng, window_s=stamp)
-        diagnosis.finish(result, config)
-        verdicts.append(result["verdict"])
-        if stamp == 120.0:
-            assert diagnosis._pool.significant("rudder_offset")
-            waits = "named once the diagnoses pooled hold a full window's fits (they hold 0.20"
-            assert waits in result["verdict_sentence"]
-    assert verdicts == ["unexplained"] * 3 + ["missing_effect"] * 2

@@ -29,10 +29,6 @@ missing effect the free runs show with certainty), with t >= ``SIGNIFICANCE_T`` 
 (``PooledEvidence.clear_t``), and its training free runs gaining on average
 (``MIN_TRAINING_GAIN``): the rule of ``diagnose`` on more data.
 
-**A full window first.** No effect is named before the pooled slices' window shares sum to one
-full window (``MIN_WINDOWS``): a slow ship's first minutes are held out by fits on a fifth of its
-window, which determine less; the verdict says what is significant so far.
-
 **One name.** Once an effect is named ``missing_effect`` (at t >= ``SIGNIFICANCE_T``), the verdict
 names it as long as the pool holds it (its t stays at ``HOLD_T`` or above: slices where the effect
 does not show dilute its share of the pooled error, and its t, but are no evidence against it, and
@@ -103,11 +99,6 @@ WORST_SHOWN = 3  # worst free-run segments (with their conditions) in the record
 NICENESS = 10  # the diagnosis process yields the CPU to the refits
 MAX_QUEUED = 3  # node: diagnoses due while one runs wait, up to this many; beyond, the oldest is skipped
 MIN_SLICE_SAMPLES = 10  # a slice with fewer fresh held-out samples adds nothing to the pool
-# An effect is named once the pooled diagnoses hold this many full windows' worth of fits (their
-# window shares summed): the window is the span the crew gives the hull to show its dynamics, and fits
-# on parts of it determine less (a tanker's first two-minute window credited a gyro bias with half the
-# error at t 3.0, where ten minutes show a yaw damping law removing two thirds)
-MIN_WINDOWS = 1.0
 # A t beyond doubt (twice SIGNIFICANCE_T) credits a candidate with a small share of the pooled error
 # (SMALL_SHARE): the gyro's white noise, which no model removes, holds the total near the floor
 CERTAIN_T = 2.0 * SIGNIFICANCE_T
@@ -333,7 +324,6 @@ class PooledEvidence:
         self.slices = 0
         self.start = math.inf
         self.weight = 0.0  # sum over slices of samples x the slice's weight
-        self.windows = 0.0  # sum over slices of their weight: full windows' worth of fits
         self.log_ratios = np.zeros(
             rows
         )  # per row, sum over slices of weight x samples x log(its squared error / the model's)
@@ -350,7 +340,6 @@ class PooledEvidence:
         samples, squares = piece["samples"], np.asarray(piece["squares"])
         self.samples += samples
         self.weight += weight * samples
-        self.windows += weight
         self.seconds += piece["seconds"]
         self.slices += 1
         self.start = min(self.start, piece["start"])
@@ -864,8 +853,6 @@ class OnlineDiagnosis:
         before, why (the pooled evidence reversed); ``undetermined``: the candidates whose fit in the
         newest window leaves a parameter of its own undetermined (``_determined_lead``);
         ``displacement_hull``: Norrbin's law leads the damping laws (``_admitted_laws``)."""
-        if self._named is None and pool.windows < MIN_WINDOWS:
-            return None, ""
         admitted = self._admitted_laws(displacement_hull)
         ranked = sorted((n for n in pool.names[1:] if pool.significant(n)), key=lambda n: -pool.rank(n))
         named, reversal = self._named, ""
@@ -971,12 +958,6 @@ class OnlineDiagnosis:
         best = result["candidates"][0]["effect"] if result["candidates"] else None
         if best is None:
             tail = "; no catalogued effect is left to try"
-        elif pool.significant(best) and pool.windows < MIN_WINDOWS:
-            tail = (
-                f"; {best} removes {100 * pool.improvement(best):.0f} % (t {pool.t_statistic(MODEL, best):.1f}), "
-                f"named once the diagnoses pooled hold a full window's fits (they hold {pool.windows:.2f} of one: "
-                "a fit on part of the window determines less)"
-            )
         else:
             group = pool.equivalents(best) if pool.removes_enough(best) else []
             tail = (

@@ -36,7 +36,7 @@ BOUNDED = [(cls, f.name) for cls in NODE_PARAMETERS for f in fields(cls) if f.me
 
 def test_every_node_parameter_is_defined_once_with_a_description():
     names = [f.name for cls in NODE_PARAMETERS for f in fields(cls)]
-    assert len(names) == len(set(names)) == len(DEFINED) == 31
+    assert len(names) == len(set(names)) == len(DEFINED) == 30
     assert all(s.description for _, s in DEFINED.values())
     assert spec(OnlineConfig, "window_length").limits == (10.0, 3600.0)
 

@@ -26,10 +26,8 @@ vessel's kind (a slow ship's crew gives it ten minutes). Three kinds of trip:
   less and more (``JUDGE_SPANS_S``, each printed): a Nomoto model fitted to an MMG hull's random
   steps and run free over a 200 s turning circle integrates a small error of its steady turn rate,
   so one fit's share moves by up to a quarter of the error with a minute more or less of training
-  data, and a fit that fails scores 0 (``median_shares``). The trip is replayed with
-  ``--displacement-hull``, as a tanker's crew would set it (Norrbin's law leads the damping laws the
-  data do not tell apart); the hidden-effect and none trips, on Nomoto models with the catalogued
-  effects, are not told their hull. ``--count 0 --none-trips 0`` draws MMG trips alone.
+  data, and a fit that fails scores 0 (``median_shares``). ``--count 0 --none-trips 0`` draws MMG
+  trips alone.
 
 Per trip:
 
@@ -57,7 +55,6 @@ from __future__ import annotations
 
 import tempfile
 from collections import Counter
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -114,7 +111,6 @@ def node_parameters(config: OnlineConfig) -> list[str]:
         f"sample_time:={config.sample_time}",
         f"diagnosis_period:={config.diagnosis_period}",
         "auto_add_effects:=true",
-        f"displacement_hull:={str(config.displacement_hull).lower()}",
     ]
 
 
@@ -335,7 +331,7 @@ def run_mmg_trip(seed: int, trip_s: float = TRIP_S, named_by_s: float = NAMED_BY
 
     hull = mmg.random_hull(np.random.default_rng(seed))
     run = mmg.simulate(hull, mmg.TRAINING, seed, duration=trip_s)
-    diagnoses, duration, wall, _ = replayed(run, replace(trip_config(MMG_KIND), displacement_hull=True))
+    diagnoses, duration, wall, _ = replayed(run, trip_config(MMG_KIND))
     row = trip_row(seed, "mmg", hull.name, "steps", diagnoses, duration)
     row["replay_wall_seconds"] = wall
     validation = mmg.held_out_recordings(hull, seed)

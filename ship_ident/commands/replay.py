@@ -72,11 +72,6 @@ def add_parser(subparsers) -> None:
         help=spec(OnlineConfig, "auto_add_after").description + " (default %(default)s)",
     )
     parser.add_argument(
-        "--displacement-hull",
-        action="store_true",
-        help=spec(OnlineConfig, "displacement_hull").description + " (default: off)",
-    )
-    parser.add_argument(
         "--diagnosis-plot",
         metavar="FILE.png",
         help="draw the held-out error of every diagnosis over the trip, the noise floor and the effects in force",
@@ -123,7 +118,6 @@ def config_from_args(args, topics: Topics, has_speed: bool) -> OnlineConfig:
         diagnosis_period=args.diagnosis_period,
         auto_add_effects=args.auto_add_effects,
         auto_add_after=args.auto_add_after,
-        displacement_hull=args.displacement_hull,
         model=args.model,
         effects=args.effects,
         method=args.method,

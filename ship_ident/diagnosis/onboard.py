@@ -39,9 +39,8 @@ says so. Candidates the pool cannot tell from the named one (removing at least
 ``MIN_IMPROVEMENT``, within ``EQUIVALENT_MARGIN`` of its share, not significantly worse) are
 named with it as a group, with what would separate them
 (``SIGNATURES``). Among yaw damping laws, whose separate refits differ by their searches, the law
-the windows' fits holding both laws show most often (``damping_laws``) leads, or on a hull the
-node is told is a displacement ship's (``displacement_hull``) Norrbin's law (``course_instability``),
-and a rival law it does not admit reverses nothing (``law_lead``). Adding or removing an effect starts the new
+the windows' fits holding both laws show most often (``damping_laws``) leads, and a rival law it
+does not admit reverses nothing (``_law_lead``). Adding or removing an effect starts the new
 model's pool, or resumes the one it left when it was last in force (the evidence is the model's on
 this vessel: an effect tried and removed again leaves the model's minutes of evidence as they
 were); a changed vessel starts a new pool and drops the pools left.
@@ -77,7 +76,7 @@ from ..model.dataset import DataError, Dataset
 from ..model.effects import EFFECTS
 from ..model.metrics import effective_sample_fraction
 from ..model.structure import StructureError
-from .damping_law import DAMPING_LAWS, UNSTABLE
+from .damping_law import DAMPING_LAWS
 from .diagnose import (
     CLEAR_TRAINING_GAIN,
     EQUIVALENT_MARGIN,
@@ -803,7 +802,7 @@ class OnlineDiagnosis:
             for c in result["candidates"]
             if {p.name for p in EFFECTS[c["effect"]].parameters} & set(c.get("undetermined", []))
         }
-        found, reversal = self._name(pool, undetermined, config.displacement_hull)
+        found, reversal = self._name(pool, undetermined)
         self._mark(result, pool, found)
         result["pooled"] = pool.summary(self._origin)
         effects = structure[1]
@@ -826,12 +825,6 @@ class OnlineDiagnosis:
                     if group
                     else ""
                 )
-                + (
-                    "; on a displacement hull Norrbin's law leads the damping laws these data do not tell apart "
-                    "(a linear damping of either sign, the data's, and a cubic one)"
-                    if config.displacement_hull and found == UNSTABLE and any(n in DAMPING_LAWS for n in group)
-                    else ""
-                )
                 + (f"; {reversal}" if reversal else "")
                 + (
                     "; auto-add tried it and removed it again (the held-out error did not fall with it): it is "
@@ -848,12 +841,10 @@ class OnlineDiagnosis:
             self._verdict_without(result, pool, rests_on, ratio)
         return self._auto_add(result, found, effects, config)
 
-    def _name(self, pool: PooledEvidence, undetermined: set, displacement_hull: bool) -> tuple[str | None, str]:
+    def _name(self, pool: PooledEvidence, undetermined: set) -> tuple[str | None, str]:
         """The effect the pool names missing (None: none) and, when it differs from the one named
         before, why (the pooled evidence reversed); ``undetermined``: the candidates whose fit in the
-        newest window leaves a parameter of its own undetermined (``_determined_lead``);
-        ``displacement_hull``: Norrbin's law leads the damping laws (``_admitted_laws``)."""
-        admitted = self._admitted_laws(displacement_hull)
+        newest window leaves a parameter of its own undetermined (``_determined_lead``)."""
         ranked = sorted((n for n in pool.names[1:] if pool.significant(n)), key=lambda n: -pool.rank(n))
         named, reversal = self._named, ""
         if named is not None and pool.holds(named):
@@ -861,9 +852,7 @@ class OnlineDiagnosis:
                 (
                     n
                     for n in ranked
-                    if n != named
-                    and pool.t_statistic(named, n) >= SIGNIFICANCE_T
-                    and not law_prefers(admitted, named, n)
+                    if n != named and pool.t_statistic(named, n) >= SIGNIFICANCE_T and not self._law_prefers(named, n)
                 ),
                 None,
             )
@@ -874,7 +863,7 @@ class OnlineDiagnosis:
                 )
                 named = rival
         elif ranked:
-            lead = law_lead(pool, self._determined_lead(pool, ranked[0], undetermined), undetermined, admitted)
+            lead = self._law_lead(pool, self._determined_lead(pool, ranked[0], undetermined), undetermined)
             if named is not None and lead != named:
                 reversal = (
                     f"named instead of {named}: the pooled evidence reversed, {named} now removes "
@@ -910,15 +899,39 @@ class OnlineDiagnosis:
         )
         return next(determined, leader)
 
-    def _admitted_laws(self, displacement_hull: bool) -> set:
-        """The yaw damping laws a lead among damping laws may be: on a displacement hull Norrbin's law
-        (``course_instability``: a displacement ship's yaw moment is odd in the turn rate, its linear
-        term of either sign, and that law holds a course-stable hull's cubic damping too), else the
-        laws the pooled diagnoses' fits holding both laws showed most often (none yet: empty)."""
-        if displacement_hull:
-            return {UNSTABLE}
+    def _law_lead(self, pool: PooledEvidence, leader: str, undetermined: set) -> str:
+        """``leader``, or, when it is a yaw damping law, the best ranked significant damping law within
+        ``EQUIVALENT_MARGIN`` of its share that the law shown most often by the pooled diagnoses'
+        fits holding both laws (``damping_law``) admits, its own parameters determined. Refitted
+        apart, a quadratic damping, a cubic one and the cubic one of a course-unstable hull each
+        predict the held-out turns within a few per cent of the others, and which predicts best is
+        which search got closest to its optimum (a USV's hidden cubic damping, refitted alone,
+        removed 27 % where the quadratic law removed 30 %, at t 3 between them); the shape of the
+        damping against the turn rate and the sign of the linear damping are what tell the laws
+        apart, and one search holding both reads them."""
+        shown = self._shown_laws()
+        if leader not in DAMPING_LAWS or not shown or leader in shown:
+            return leader
+        admitted = (
+            n
+            for n in sorted(shown & set(pool.names), key=lambda n: -pool.rank(n))
+            if n not in undetermined
+            and pool.significant(n)
+            and pool.improvement(leader) - pool.improvement(n) <= EQUIVALENT_MARGIN
+        )
+        return next(admitted, leader)
+
+    def _shown_laws(self) -> set:
+        """The damping laws the pooled diagnoses' fits holding both laws showed most often (none yet: empty)."""
         most = max(self._laws.values(), default=0)
         return {law for law, count in self._laws.items() if count == most > 0}
+
+    def _law_prefers(self, named: str, rival: str) -> bool:
+        """Whether the damping law the pooled fits holding both laws show admits ``named`` and not
+        ``rival``, both damping laws: the rival's lower error is then its search's, not its law's
+        (``_law_lead``), and no reversal."""
+        shown = self._shown_laws()
+        return named in DAMPING_LAWS and rival in DAMPING_LAWS and named in shown and rival not in shown
 
     @staticmethod
     def _shares(pool: PooledEvidence, group: list[str]) -> str:
@@ -1031,30 +1044,3 @@ class OnlineDiagnosis:
             return None
         self._asked = effects
         return effects
-
-
-def law_lead(pool: PooledEvidence, leader: str, undetermined: set, admitted: set) -> str:
-    """``leader``, or, when it is a yaw damping law the ``admitted`` laws (``_admitted_laws``) do not
-    hold, the best ranked significant admitted law within ``EQUIVALENT_MARGIN`` of its share, its own
-    parameters determined. Refitted apart, a quadratic damping, a cubic one and the cubic one of a
-    course-unstable hull each predict the held-out turns within a few per cent of the others, and
-    which predicts best is which search got closest to its optimum (a USV's hidden cubic damping,
-    refitted alone, removed 27 % where the quadratic law removed 30 %, at t 3 between them); the
-    shape of the damping against the turn rate and the sign of the linear damping are what tell the
-    laws apart, and one search holding both reads them, or the hull's form is known."""
-    if leader not in DAMPING_LAWS or not admitted or leader in admitted:
-        return leader
-    lead = (
-        n
-        for n in sorted(admitted & set(pool.names), key=lambda n: -pool.rank(n))
-        if n not in undetermined
-        and pool.significant(n)
-        and pool.improvement(leader) - pool.improvement(n) <= EQUIVALENT_MARGIN
-    )
-    return next(lead, leader)
-
-
-def law_prefers(admitted: set, named: str, rival: str) -> bool:
-    """Whether the ``admitted`` damping laws hold ``named`` and not ``rival``, both damping laws: the
-    rival's lower error is then its search's, not its law's (``law_lead``), and no reversal."""
-    return named in DAMPING_LAWS and rival in DAMPING_LAWS and named in admitted and rival not in admitted

@@ -289,13 +289,6 @@ class OnlineConfig:
     auto_add_after: int = parameter(
         3, "consecutive diagnoses naming the same effect before auto_add_effects adds it", "", (1, 100), group=DIAGNOSIS
     )
-    displacement_hull: bool = parameter(
-        False,
-        "the hull is a displacement ship's (a tanker, a ferry): its yaw damping is odd in the turn rate, a linear "
-        "term of either sign and a cubic one (Norrbin's law), so among yaw damping laws the held-out data cannot "
-        "tell apart that law (course_instability) is named; off: the fits holding both laws decide",
-        group=DIAGNOSIS,
-    )
 
     def __post_init__(self):
         try:

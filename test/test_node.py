@@ -254,8 +254,12 @@ def test_effects_change_at_run_time(env, domain_id, bag):
     # ~/parameters: the OK estimates alone, each with its own model's names
     trusted = [",".join(e["parameters"]) for e in listener.estimates if e["status"] == "OK"]
     assert [m.layout.dim[0].label for m in listener.parameters] == trusted
-    # the bag's gyro reads true (no bias in its truth): the new parameter is estimated, near zero
-    assert abs(math.degrees(after["parameters"]["r_bias"])) < 0.05  # deg/s
+    # the bag's gyro reads true (no bias in its truth): the new parameter is estimated near zero, within
+    # three of its own standard errors (a starved node's 60 s window has gaps and says so), and they are tight
+    bias, bias_error = (math.degrees(after[key]["r_bias"]) for key in ("parameters", "std_errors"))
+    print(f"r_bias {bias:.4f} +- {bias_error:.4f} deg/s")
+    # deg/s: 0.002 +- 0.009 measured quiet, -0.031 +- 0.025 beside two CPU hogs
+    assert abs(bias) <= 3.0 * bias_error and bias_error < 0.05
     assert after["stamp"] > before["stamp"]
 
 

@@ -449,7 +449,6 @@ def _advance_lane_pair(
                 live_b = False
 
 
-@njit(cache=True, error_model="numpy")
 def simulate_kernel(
     order,
     h,
@@ -509,14 +508,32 @@ def simulate_kernel(
         (m, n) heading (rad) and yaw rate (rad/s) of every run, NaN outside the segments. A blow-up
         (non-finite state, |r| > 1e3 rad/s) fills the rest of its segment with NaN.
     """
-    # each order its own compiled body (a constant order is typed as a literal): no branch on the
-    # order is left in the loops
     inputs = (h, rudder, gain_scale, time_scale, constants, bounds, initial, coef, r_power, abs_power, harmonic, trig)
-    if order == QUASI_STEADY:
-        return _simulate(QUASI_STEADY, inputs, substeps)
-    if order == 1:
-        return _simulate(1, inputs, substeps)
+    return KERNELS[order](inputs, substeps)
+
+
+# Each order its own compiled kernel (the order a constant, typed as a literal: no branch on it is left
+# in the loops), compiled on its first use: a USV's refits compile the second-order one alone
+@njit(cache=True, error_model="numpy")
+def first_order_kernel(inputs, substeps):
+    """``simulate_kernel`` of nomoto1 (``inputs``: its arguments from ``h`` to ``trig``)."""
+    return _simulate(1, inputs, substeps)
+
+
+@njit(cache=True, error_model="numpy")
+def second_order_kernel(inputs, substeps):
+    """``simulate_kernel`` of nomoto2 (``inputs``: its arguments from ``h`` to ``trig``)."""
     return _simulate(2, inputs, substeps)
+
+
+@njit(cache=True, error_model="numpy")
+def quasi_steady_kernel(inputs, substeps):
+    """``simulate_kernel`` of nomoto2 with its fast pole quasi-steady (``inputs``: its arguments from
+    ``h`` to ``trig``)."""
+    return _simulate(QUASI_STEADY, inputs, substeps)
+
+
+KERNELS = {1: first_order_kernel, 2: second_order_kernel, QUASI_STEADY: quasi_steady_kernel}
 
 
 @njit(cache=True, error_model="numpy")

@@ -8,7 +8,6 @@ from scipy import signal
 
 from ship_ident.model.dataset import DataError, Dataset, cut_segments, median_above, resample_series
 from ship_ident.model.filters import convolve_columns, savgol
-from ship_ident.model.integrate import quasi_steady_substeps
 from ship_ident.model.simulator import simulate
 from ship_ident.model.structure import Structure, StructureError
 
@@ -62,35 +61,6 @@ def test_runs_side_by_side_equal_one_run_per_segment():
     blown = np.flatnonzero(np.isnan(psi[2, 701:]))
     assert 0 < blown[0] and np.all(np.diff(blown) == 1) and blown[-1] == data.n_samples - 702
     assert not np.any(np.isnan(psi[:2]))
-
-
-def test_a_ships_fast_pole_far_quicker_than_its_samples_is_held_quasi_steady_on_every_path():
-    """A ship logged at 2 Hz whose second pole (2 ms) is far below a hundredth of the sample time: its
-    yaw rate, held on the quasi-steady value of the slow state, follows the exact linear response
-    within a few times the phase lag the pole would add (omega T2 = 1e-4 at the rudder's 0.05 rad/s),
-    in one RK4 step per sample where the full model needs 200 (the fast pole's stability); a lane
-    alone, lanes in pairs and the vector loops give the same numbers."""
-    h = 0.5
-    p = {"K": 0.2, "T1": 60.0, "T2": 0.002, "T3": 5.0}
-    time = np.arange(0, 900, h)
-    rudder = np.radians(20) * np.sin(0.05 * time) * (time > 5)
-    structure = Structure("nomoto2")
-    constants = np.array([[p["K"], p["T1"], p["T2"], p["T3"]]])
-    assert quasi_steady_substeps(h, constants, np.ones((1, len(time))), np.zeros((1, 0)), [], 0.1) == 1
-    _, r = structure.simulate(p, _dataset(time, rudder))
-    system = signal.lti([p["K"] * p["T3"], p["K"]], [p["T1"] * p["T2"], p["T1"] + p["T2"], 1.0])
-    fine = np.arange(0, time[-1] + 1e-9, 0.01)
-    _, r_exact, _ = signal.lsim(system, np.interp(fine, time, rudder), fine)
-    error = np.max(np.abs(r - np.interp(time, fine, r_exact))) / np.max(np.abs(r))
-    assert error < 5e-4  # of the largest rate; measured 2.2e-4
-    data = replace(_dataset(time, rudder), segments=tuple((a, a + 150) for a in range(0, 1800, 150)))
-    runs = [dict(p, K=p["K"] * (1 + 0.01 * k)) for k in range(3)]
-    three_lanes = structure.simulate_runs(runs[:1], replace(data, segments=data.segments[:3]))
-    many_lanes = structure.simulate_runs(runs, data)  # 36 lanes: vector loops
-    for a, b in data.segments[:3]:
-        alone = structure.simulate(runs[0], replace(data, segments=((a, b),)))
-        np.testing.assert_allclose(three_lanes[1][0, a:b], alone[1][a:b], rtol=1e-12, atol=1e-15)
-        np.testing.assert_allclose(many_lanes[1][0, a:b], alone[1][a:b], rtol=1e-12, atol=1e-15)
 
 
 def test_simulated_heading_is_wrapped_but_dataset_unwrapped():

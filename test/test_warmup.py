@@ -53,10 +53,10 @@ def test_first_start_compiles_the_usv_refit_kernels_once_and_the_next_start_load
     innovation filter and writes them to the cache; the next start finds every one there, and
     neither it nor the refits of a USV's bag after it compile any."""
     first = _warm_up_in_a_fresh_process(tmp_path)
-    assert first["ship_ident.model.integrate.second_order_kernel"][1] >= 1
+    assert first["ship_ident.model.integrate.simulate_kernel"][1] >= 1
     assert first["ship_ident.estimators.innovations._whiten_blocks"][1] >= 1
-    assert any(tmp_path.rglob("*second_order_kernel*.nbi")) and any(tmp_path.rglob("*_whiten_blocks*.nbc"))
+    assert any(tmp_path.rglob("*simulate_kernel*.nbi")) and any(tmp_path.rglob("*_whiten_blocks*.nbc"))
     second = _warm_up_in_a_fresh_process(tmp_path, str(Path(__file__).parents[1] / "bags" / "demo_seed001.mcap"))
     assert all(misses == 0 for _, misses in second.values()), second
-    assert second["ship_ident.model.integrate.second_order_kernel"][0] >= 1
+    assert second["ship_ident.model.integrate.simulate_kernel"][0] >= 1
     assert second["ship_ident.estimators.innovations._whiten_blocks"][0] >= 1

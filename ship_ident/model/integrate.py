@@ -11,15 +11,6 @@ forcing terms (rad/s), each ``c * r**p * |r|**q * trig(k psi)``. The rudder
 derivative is never formed: nomoto2 is integrated in the state
 (psi, r, z) with z = T1 T2 r' + (T1 + T2) r - K T3 d, so z' = K d + F - r.
 
-A fast pole far quicker than the samples (``QUASI_STEADY``: its time T1 T2 / (T1 + T2) below
-a hundredth of the sample time) has settled long before the next sample, and RK4 would need a
-step of half its time to stay stable (200 steps per sample for a ship's undetermined 1 ms
-pole). There the yaw rate is held on its quasi-steady value r = (z + K T3 d) / (T1 + T2) (the
-equation with T1 T2 r'' dropped, Tikhonov's reduction), and only psi and z are integrated, in
-steps of the slow motion (``quasi_steady_substeps``); the response differs from the full
-model's by the phase lag the pole would add, omega T2 at the rudder's frequency omega (below
-pi / 100 even at the samples' Nyquist frequency).
-
 Inputs are samples: the rudder is interpolated linearly between samples
 (first-order hold), speed scales are held per sample. Gains scale with
 ``gain_scale`` (K -> K g) and time constants with ``time_scale``
@@ -32,8 +23,6 @@ import numpy as np
 from numba import njit
 
 TRIG_NONE, TRIG_COS, TRIG_SIN = 0, 1, 2
-QUASI_STEADY = 3  # the kernel's order for nomoto2 with its fast pole held quasi-steady (module docstring)
-QUASI_STEADY_RATIO = 100.0  # a fast pole quicker than the sample time over this is held quasi-steady
 TERM_FIELDS = ("r_power", "abs_power", "harmonic", "trig")  # integer fields of a forcing term, in kernel order
 RK4_NODES = np.array([0.0, 0.5, 0.5, 1.0])  # stage times within a step, in steps
 # Up to this many lanes ``simulate_kernel`` steps them in pairs over all their samples, beyond it in vector loops
@@ -63,9 +52,6 @@ def _forcing(psi, r, coef, r_power, abs_power, harmonic, trig):
 
 @njit(cache=True)
 def _rhs(order, psi, r, z, d, K, T1, T2, T3, coef, r_power, abs_power, harmonic, trig):
-    if order == QUASI_STEADY:
-        r = (z + K * T3 * d) / (T1 + T2)
-        return r, 0.0, K * d + _forcing(psi, r, coef, r_power, abs_power, harmonic, trig) - r
     f = _forcing(psi, r, coef, r_power, abs_power, harmonic, trig)
     if order == 1:
         return r, (K * d + f - r) / T1, 0.0
@@ -84,8 +70,7 @@ def advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, coef, r_power, abs_power
     Parameters
     ----------
     order : int
-        1 (nomoto1: T r' + r = K d, T = T1), 2 (nomoto2) or QUASI_STEADY (nomoto2, its fast pole
-        quasi-steady: r follows z).
+        1 (nomoto1: T r' + r = K d, T = T1) or 2 (nomoto2).
     h : float
         Sample time (s).
     d0, d1 : float
@@ -164,8 +149,6 @@ def advance(order, h, d0, d1, K, T1, T2, T3, psi, r, z, coef, r_power, abs_power
         psi += dt * (k1p + 2 * k2p + 2 * k3p + k4p) / 6.0
         r += dt * (k1r + 2 * k2r + 2 * k3r + k4r) / 6.0
         z += dt * (k1z + 2 * k2z + 2 * k3z + k4z) / 6.0
-    if order == QUASI_STEADY:
-        r = (z + K * T3 * d1) / (T1 + T2)
     return psi, r, z
 
 
@@ -272,9 +255,6 @@ def _lane_slopes(order, tp, tr, tz, d, lane_constants, coef, r_power, abs_power,
     K T3, 1 / T) and the forcing terms as ``_forcing``'s: the same operations as the vector loops,
     so the same numbers."""
     K, S, inv_P, KT3, inv_T = lane_constants
-    if order == QUASI_STEADY:
-        tr = (tz + KT3 * d) / S
-        return tr, 0.0, K * d + _forcing(tp, tr, coef, r_power, abs_power, harmonic, trig) - tr
     force = _forcing(tp, tr, coef, r_power, abs_power, harmonic, trig)
     if order == 1:
         return tr, (K * d + force - tr) * inv_T, 0.0
@@ -351,8 +331,6 @@ def _rk4_substep(
     p += dt * (s1p + 2 * s2p + 2 * s3p + s4p) / 6
     q += dt * (s1r + 2 * s2r + 2 * s3r + s4r) / 6
     w += dt * (s1z + 2 * s2z + 2 * s3z + s4z) / 6
-    if order == QUASI_STEADY:
-        q = (w + lane_constants[3] * d_end) / lane_constants[1]
     return p, q, w
 
 
@@ -449,6 +427,7 @@ def _advance_lane_pair(
                 live_b = False
 
 
+@njit(cache=True, error_model="numpy")
 def simulate_kernel(
     order,
     h,
@@ -481,7 +460,7 @@ def simulate_kernel(
     Parameters
     ----------
     order : int
-        1 or 2 (nomoto1, nomoto2), or QUASI_STEADY (nomoto2, its fast pole quasi-steady: r follows z).
+        1 or 2 (nomoto1, nomoto2).
     h : float
         Sample time (s).
     rudder : numpy.ndarray
@@ -508,38 +487,6 @@ def simulate_kernel(
         (m, n) heading (rad) and yaw rate (rad/s) of every run, NaN outside the segments. A blow-up
         (non-finite state, |r| > 1e3 rad/s) fills the rest of its segment with NaN.
     """
-    inputs = (h, rudder, gain_scale, time_scale, constants, bounds, initial, coef, r_power, abs_power, harmonic, trig)
-    return KERNELS[order](inputs, substeps)
-
-
-# Each order its own compiled kernel (the order a constant, typed as a literal: no branch on it is left
-# in the loops), compiled on its first use: a USV's refits compile the second-order one alone
-@njit(cache=True, error_model="numpy")
-def first_order_kernel(inputs, substeps):
-    """``simulate_kernel`` of nomoto1 (``inputs``: its arguments from ``h`` to ``trig``)."""
-    return _simulate(1, inputs, substeps)
-
-
-@njit(cache=True, error_model="numpy")
-def second_order_kernel(inputs, substeps):
-    """``simulate_kernel`` of nomoto2 (``inputs``: its arguments from ``h`` to ``trig``)."""
-    return _simulate(2, inputs, substeps)
-
-
-@njit(cache=True, error_model="numpy")
-def quasi_steady_kernel(inputs, substeps):
-    """``simulate_kernel`` of nomoto2 with its fast pole quasi-steady (``inputs``: its arguments from
-    ``h`` to ``trig``)."""
-    return _simulate(QUASI_STEADY, inputs, substeps)
-
-
-KERNELS = {1: first_order_kernel, 2: second_order_kernel, QUASI_STEADY: quasi_steady_kernel}
-
-
-@njit(cache=True, error_model="numpy")
-def _simulate(order, inputs, substeps):
-    """``simulate_kernel`` for one order (a compile-time constant)."""
-    h, rudder, gain_scale, time_scale, constants, bounds, initial, coef, r_power, abs_power, harmonic, trig = inputs
     runs, n = rudder.shape
     segments = bounds.shape[0]
     lanes = runs * segments
@@ -653,17 +600,12 @@ def _simulate(order, inputs, substeps):
                         tp[lane] = psi[lane] + weight * stage[q - 1, 0, lane]
                         tr[lane] = r[lane] + weight * stage[q - 1, 1, lane]
                         tz[lane] = z[lane] + weight * stage[q - 1, 2, lane]
-                    if order == QUASI_STEADY:
-                        tr[lane] = (tz[lane] + KT3[lane] * d[lane]) / S[lane]
                 _forcing_lanes(force, work, tp, tr, lane_coef, r_power, abs_power, harmonic, trig)
                 for lane in range(lanes):
                     stage[q, 0, lane] = tr[lane]
                     if order == 1:
                         stage[q, 1, lane] = (K[lane] * d[lane] + force[lane] - tr[lane]) * inv_T[lane]
                         stage[q, 2, lane] = 0.0
-                    elif order == QUASI_STEADY:
-                        stage[q, 1, lane] = 0.0
-                        stage[q, 2, lane] = K[lane] * d[lane] + force[lane] - tr[lane]
                     else:
                         stage[q, 1, lane] = (tz[lane] - S[lane] * tr[lane] + KT3[lane] * d[lane]) * inv_P[lane]
                         stage[q, 2, lane] = K[lane] * d[lane] + force[lane] - tr[lane]
@@ -677,8 +619,6 @@ def _simulate(order, inputs, substeps):
                 z[lane] += (
                     dt * (stage[0, 2, lane] + 2 * stage[1, 2, lane] + 2 * stage[2, 2, lane] + stage[3, 2, lane]) / 6
                 )
-                if order == QUASI_STEADY:
-                    r[lane] = (z[lane] + KT3[lane] * (d0[lane] + ((sub + 1.0) / substeps) * slope[lane])) / S[lane]
         for lane in range(lanes):
             k = first[lane] + step
             if alive[lane] and k <= last[lane]:
@@ -714,70 +654,6 @@ def forcing(psi: np.ndarray, r: np.ndarray, terms) -> np.ndarray:
         psi, r = np.ascontiguousarray(psi, dtype=float), np.ascontiguousarray(r, dtype=float)
         _forcing_lanes(out, np.empty(n), psi, r, coef, *ints)
     return out
-
-
-def fast_pole_times(constants: np.ndarray) -> np.ndarray:
-    """Each run's fast time T1 T2 / (T1 + T2): the fast pole's time where it is far the quicker.
-
-    Parameters
-    ----------
-    constants : numpy.ndarray
-        The kernel's (m, 4) K (1/s), T1, T2, T3 (s) of each run.
-
-    Returns
-    -------
-    numpy.ndarray
-        (m,) fast times (s; 0 for nomoto1).
-    """
-    return constants[:, 1] * constants[:, 2] / (constants[:, 1] + constants[:, 2])
-
-
-def quasi_steady_substeps(
-    h: float, constants: np.ndarray, time_scale: np.ndarray, coef: np.ndarray, terms: list, yaw_rate_max: float
-) -> int:
-    """RK4 substeps per sample of the quasi-steady model (``QUASI_STEADY``), two per time of its slow motion.
-
-    With r = (z + K T3 d) / S (S = T1 + T2) the state z moves at the rate (1 - dF/dr) / S: the
-    forcing's derivative bounded over the turn rates up to ``yaw_rate_max`` (rad/s) term by term (a
-    term linear in r counts with its sign: the acceleration form's linear damping), and a heading
-    harmonic c cos(k psi) adds its swing rate sqrt(|c| k / S).
-
-    Parameters
-    ----------
-    h : float
-        Sample time (s).
-    constants : numpy.ndarray
-        (m, 4) K, T1, T2, T3 of each run.
-    time_scale : numpy.ndarray
-        (m, n) multipliers of the time constants.
-    coef : numpy.ndarray
-        (m, terms) forcing coefficients.
-    terms : list of ForcingTerm
-        The forcing terms' shapes (``effects.ForcingTerm``), one per column of ``coef``.
-    yaw_rate_max : float
-        Largest turn rate to bound the forcing's derivative over (rad/s).
-
-    Returns
-    -------
-    int
-        Substeps per sample.
-    """
-    slow = (constants[:, 1] + constants[:, 2]) * np.min(time_scale, axis=1)
-    linear = np.ones(len(slow))  # d/dr of F - r without the nonlinear terms: -1, and linear terms' c
-    nonlinear = np.zeros(len(slow))
-    swing = np.zeros(len(slow))
-    for i, term in enumerate(terms):
-        powers = term.r_power + term.abs_power
-        c = np.abs(coef[:, i])
-        if term.trig != TRIG_NONE:
-            swing += np.sqrt(c * term.harmonic / slow) if powers == 0 else 0.0
-            nonlinear += c * powers * yaw_rate_max ** max(powers - 1, 0)
-        elif powers == 1 and term.r_power == 1:
-            linear -= coef[:, i]
-        elif powers > 0:
-            nonlinear += c * powers * yaw_rate_max ** (powers - 1)
-    rate = float(np.max((np.abs(linear) + nonlinear) / slow + swing))
-    return substeps_for(h, 1.0 / rate) if rate > 0 else 1
 
 
 def substeps_for(h: float, fastest_time_constant: float, steps_per_time_constant: float = 2.0) -> int:

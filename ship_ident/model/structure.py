@@ -46,15 +46,7 @@ import numpy as np
 
 from .dataset import DataError, Dataset
 from .effects import EFFECTS, Effect, ForcingTerm, Parameter
-from .integrate import (
-    QUASI_STEADY,
-    QUASI_STEADY_RATIO,
-    TERM_FIELDS,
-    fast_pole_times,
-    quasi_steady_substeps,
-    simulate_kernel,
-    substeps_for,
-)
+from .integrate import TERM_FIELDS, simulate_kernel, substeps_for
 
 BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
     "nomoto1": (
@@ -419,14 +411,8 @@ class Structure:
                 for p in param_sets
             ]
         initial = np.array(initials, dtype=float).reshape(runs, len(bounds), 3)
-        order = self.order
-        if order == 2 and np.max(fast_pole_times(constants) * np.max(tscale, axis=1)) < h / QUASI_STEADY_RATIO:
-            # a pole settled within a hundredth of a sample: the yaw rate follows the slow state
-            order = QUASI_STEADY
-            yaw_rate_max = 1.5 * float(np.max(np.abs(dataset.yaw_rate))) if dataset.n_samples else 0.0
-            substeps = min(substeps, quasi_steady_substeps(h, constants, tscale, coef, kernels[0][1], yaw_rate_max))
         psi_out, r_out = simulate_kernel(
-            order, h, rudder, gain, tscale, constants, bounds, initial, coef, *ints, substeps
+            self.order, h, rudder, gain, tscale, constants, bounds, initial, coef, *ints, substeps
         )
         for k, p in enumerate(param_sets):
             r_out[k] = self.measured_yaw_rate(r_out[k], p)

@@ -5,9 +5,7 @@ and kept in numba's on-disk cache (``cache=True``, next to the modules, or in ``
 Right after an install that cache is empty, and a boat's first refit would spend about 13 s
 compiling. ``warm_up`` runs the online core, as configured, over a short simulated manoeuvre: every
 kernel a refit, a change watch and a profile of the cost calls is compiled and cached with the very
-argument types they get on board, and the integrator's kernels of the other orders a diagnosis calls
-(a first-order model, a fast pole held quasi-steady) beside them. With the cache filled, it loads them
-in well under a second.
+argument types they get on board. With the cache filled, it loads them in well under a second.
 
 The node runs it at start in a child process at low priority (``warm_up_quietly``; the window
 fills meanwhile, and the node's first refit loads what it cached); ``make setup`` runs it once
@@ -21,7 +19,6 @@ import time
 from dataclasses import replace
 
 from ..model.simulator import simulate
-from ..model.structure import Structure
 from .config import OnlineConfig
 from .identifier import OnlineIdentifier, run_schedule
 from .samples import dataset_samples
@@ -48,9 +45,6 @@ def warm_up(config: OnlineConfig | None = None) -> float:
     dataset = simulate("mixed", duration=WARM_UP_SECONDS, sample_time=config.sample_time, seed=0).dataset
     for _ in run_schedule(OnlineIdentifier(config), dataset_samples(dataset)):
         pass
-    # the integrator's first-order and quasi-steady kernels, which a diagnosis calls and these refits do not
-    Structure("nomoto1").simulate({"K": 0.1, "T": 5.0}, dataset)
-    Structure("nomoto2").simulate({"K": 0.1, "T1": 5.0, "T2": 1e-5, "T3": 0.0}, dataset)
     return time.perf_counter() - started
 
 

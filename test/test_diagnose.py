@@ -31,6 +31,7 @@ from ship_ident.diagnosis.diagnose import (
     windows,
 )
 from ship_ident.estimators import Estimate, make_estimator
+from ship_ident.model import structure as structure_module
 from ship_ident.model.dataset import join_recordings
 from ship_ident.model.effects import EFFECTS, Evidence
 from ship_ident.model.simulator import VESSELS, Noise, Vessel, simulate
@@ -500,26 +501,32 @@ def test_a_slow_ship_with_quadratic_damping_keeps_its_fast_pole_where_the_valley
     assert first.improvement_heading > 0.6
 
 
-def test_a_course_unstable_slow_ship_stopped_in_its_lead_pole_valley_is_moved_along_it():
-    """A slow, course-unstable ship (a1 -0.024 1/s, fast pole m2 1.6 s, rudder lead b1 / b0 1.1 s):
-    its candidate's search stopped unconverged at m2 0.16 s with a lead that nearly cancels it, the
-    valley of the acceleration form. Along it the search's cost falls and the training free runs run
-    closer; moved there and searched on, the fit finds the fast pole and runs free on the held-out
-    part as close as the truth."""
+def test_a_course_unstable_slow_ship_finds_its_fast_pole_above_a_third_of_a_sample(monkeypatch):
+    """A slow, course-unstable ship (a1 -0.024 1/s, fast pole m2 1.6 s, rudder lead b1 / b0 1.1 s,
+    0.5 s samples): with m2 free down to its 1 ms floor its candidate's search stopped unconverged at
+    m2 0.16 s with a lead that nearly cancels it, the valley of the acceleration form. Held at a third
+    of a sample or more, the search finds the fast pole and the linear damping itself and runs free on
+    the held-out part as close as the truth; a fit stopped in the valley's wrong end is moved along
+    it (the search's cost falls there) to the same place."""
     base, fit, truth, held_out = _fitted_with_and_without(493460522, "course_instability")
-    assert fit.parameters["m2"] < 0.2 * truth["m2"]  # in the valley's wrong end
-    training, rest = split(draw_case(493460522, ("course_instability",))[2].dataset)
-    window = held_out_window(base.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
-    moved = along_the_valley(fit, training, DEFAULT_METHOD, windows(training, window))
-    print(moved.parameters)
-    assert moved.parameters["m2"] == pytest.approx(truth["m2"], rel=0.15)
-    assert moved.parameters["a1"] == pytest.approx(truth["a1"], rel=0.1)
+    assert fit.parameters["m2"] == pytest.approx(truth["m2"], rel=0.15)
+    assert fit.parameters["a1"] == pytest.approx(truth["a1"], rel=0.1)
 
     def held_out_error(parameters):
         return free_run(fit.structure, parameters, held_out).fit["rmse_heading"]
 
+    assert held_out_error(fit.parameters) < 1.05 * held_out_error(truth)
+    with monkeypatch.context() as free_to_the_floor:
+        free_to_the_floor.setattr(structure_module, "POLE_NAMES", ())
+        _, stopped, _, _ = _fitted_with_and_without(493460522, "course_instability")
+    assert stopped.parameters["m2"] < 0.2 * truth["m2"]  # in the valley's wrong end
+    training, rest = split(draw_case(493460522, ("course_instability",))[2].dataset)
+    window = held_out_window(base.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
+    moved = along_the_valley(stopped, training, DEFAULT_METHOD, windows(training, window))
+    assert moved.parameters["m2"] == pytest.approx(truth["m2"], rel=0.15)
+    assert moved.parameters["a1"] == pytest.approx(truth["a1"], rel=0.1)
     assert held_out_error(moved.parameters) < 1.05 * held_out_error(truth)
-    assert held_out_error(moved.parameters) < 0.9 * held_out_error(fit.parameters)
+    assert held_out_error(moved.parameters) < 0.9 * held_out_error(stopped.parameters)
 
 
 def test_a_slow_ship_rudder_offset_whose_search_crawled_is_refined_on_long_runs():
@@ -546,14 +553,15 @@ def test_a_slow_ship_rudder_offset_whose_search_crawled_is_refined_on_long_runs(
 
 def test_a_slow_ship_with_quadratic_damping_on_a_small_zigzag_finds_its_fast_pole_on_long_runs():
     """A ship (T1 22.8 s, fast pole m2 1.6 s, rudder lead b1 / b0 3.6 s) with a quadratic yaw damping
-    on a 10/10 zigzag: on the search's 30 s intervals its candidate loses the fast pole (m2 a
-    hundredth of the truth's) and removes a fraction of the held-out heading error. Searched on
+    on a 10/10 zigzag: on the search's 30 s intervals its candidate loses much of the fast pole (m2 0.66 s;
+    a hundredth of the truth's when m2 was free down to 1 ms) and removes a fraction of the held-out
+    heading error. Searched on
     intervals as long as the training windows from the fast-pole starts, it finds the hull and
     removes more than half of that error, as the truth does. The joint fit that reads the damping
     law, started there, shows the quadratic law and the true linear damping on the same long runs
     (on 30 s intervals it ended at a1 0.094 1/s, 2.3 times the truth's, and read a cubic law)."""
     base, fit, truth, held_out = _fitted_with_and_without(87757626, "quadratic_yaw")
-    assert fit.parameters["m2"] < 0.1 * truth["m2"]
+    assert fit.parameters["m2"] < 0.5 * truth["m2"]
     training, rest = split(draw_case(87757626, ("quadratic_yaw",))[2].dataset)
     window = held_out_window(base.parameters, max(b - a for a, b in rest.segments) * rest.sample_time)
     refined = on_long_runs(fit, training, DEFAULT_METHOD, windows(training, window))

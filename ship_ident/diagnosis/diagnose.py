@@ -1049,8 +1049,9 @@ def along_the_valley(refit: Estimate | str, training: Dataset, method: str, fitt
     and the slow time 1 / |a1| (a course-unstable hull's too). A slow ship with a rudder offset was
     fitted at T2 11 s, T3 8.7 s (truth 1.4 and 0.5 s): along the valley the search's cost changed
     by 0.3 %, the training free runs' heading error by half, and the held-out one with it; a
-    course-unstable one stopped unconverged at m2 0.16 s (truth 1.6 s), where the cost falls along
-    the valley.
+    course-unstable one with m2 free down to 1 ms stopped unconverged at m2 0.16 s (truth 1.6 s),
+    where the cost falls along the valley (a fit holds m2 at a third of a sample or more,
+    ``structure.UNRESOLVED_POLE_SHARE``, and that one finds the fast pole itself).
 
     Parameters
     ----------
@@ -1667,7 +1668,7 @@ def recommend_determined(
     if not candidates:
         return
     views = (estimate, training, held_out, run, fitted_windows, fitted_run, method)
-    first = candidates[0] = first_order_view(candidates[0], *views)
+    first = candidates[0] = named_as_held(first_order_view(candidates[0], *views), candidates, *views)
     if first.estimate is None or not undetermined(first.estimate):
         return
     mark_near_equivalents(candidates, held_out)
@@ -1679,6 +1680,8 @@ def recommend_determined(
     for name in group:
         index = next(i for i, c in enumerate(candidates) if c.effect == name)
         view = first_order_view(candidates[index], *views)
+        if first.effect not in EFFECTS[view.effect].replaces:  # not back to the model form it displaces
+            view = named_as_held(view, candidates, *views)
         if view.estimate is None or undetermined(view.estimate) or (first.significant and not view.significant):
             continue
         determined.append(view)
@@ -1688,6 +1691,68 @@ def recommend_determined(
         best.near_equivalent = [first.effect]  # the held-out data cannot tell it from the one it displaced
         candidates.remove(next(c for c in candidates if c.effect == best.effect))
         candidates.insert(0, best)
+
+
+def named_as_held(
+    candidate: Candidate,
+    candidates: list[Candidate],
+    estimate: Estimate,
+    training: Dataset,
+    held_out: Dataset,
+    run: FreeRun,
+    fitted_windows: Dataset,
+    fitted_run: FreeRun,
+    method: str,
+) -> Candidate:
+    """``candidate`` named as the effect whose model its fit is, where its structure holds that one's.
+
+    A course_instability fit with a positive linear damping (a1 at least ``Z_95`` standard errors above
+    zero, K and the time constants exist) is cubic_yaw's model divided by the yaw inertia instead of by
+    that damping: the hull holds its course by itself and its turns are damped by the cube of the rate.
+    The held effect's structure is refitted from the fit's parameters in its form and judged on the
+    same held-out free runs; named so when it leaves no parameter undetermined and removes about as
+    much (within ``EQUIVALENT_MARGIN``), with the candidate's significance (the same model, the same
+    evidence) and its second-order figures.
+
+    Parameters
+    ----------
+    candidate : Candidate
+        The first candidate, in its ``first_order_view``.
+    candidates : list of Candidate
+        Every candidate (the held effect's evidence, when it was judged too).
+    estimate, training, held_out, run, fitted_windows, fitted_run, method
+        As ``first_order_view``'s.
+
+    Returns
+    -------
+    Candidate
+        ``candidate``, or the held effect's candidate on the same model.
+    """
+    fit = candidate.estimate
+    if fit is None or fit.structure.form != "acceleration" or not nomoto_parameters(fit.parameters):
+        return candidate
+    if not fit.parameters["a1"] > Z_95 * fit.std_errors.get("a1", np.inf):
+        return candidate  # the data do not tell the hull course-stable: the sign-free form stays
+    for held in EFFECTS[candidate.effect].replaces:
+        names = tuple(held if n == candidate.effect else n for n in fit.structure.effect_names)
+        structure = Structure(fit.structure.model, names)
+        start = structure.in_form(fit.parameters)
+        if any(k not in start for k in structure.free_names):
+            continue
+        refit = _estimator(method).fit(structure, training, starts=(start,))
+        evidence = next((c.evidence for c in candidates if c.effect == held), candidate.evidence)
+        view = judge(held, evidence, held_out, run, refit, fitted_windows, fitted_run)
+        if undetermined(refit) or view.improvement < candidate.improvement - EQUIVALENT_MARGIN:
+            continue
+        view.significant, view.second_order = candidate.significant, candidate.second_order
+        view.note = "; ".join(
+            [
+                *([candidate.note] if candidate.note else []),
+                f"{candidate.effect} fitted with a positive linear damping: the hull holds its course, {held}'s model",
+            ]
+        )
+        return view
+    return candidate
 
 
 def recommendation_sentence(candidate: Candidate) -> str:

@@ -78,6 +78,17 @@ ACCELERATION_MODELS: dict[str, tuple[Parameter, ...]] = {
     ),
 }
 NOMOTO_NAMES = ("K", "T", "T1", "T2", "T3")
+# The samples cannot tell a pole faster than this share of the sample time from none (5 % of its
+# response is left after one sample): a fit in the acceleration form holds its fast pole's time m2 at or
+# above it (``bounds``). Below it such a pole would only cost RK4 substeps (RK4 is stable for steps up
+# to 2.8 of the fastest time constant: a 1 ms pole needs hundreds in a ship's 0.5 s sample), and a
+# slow ship's search stopped there, its lead nearly cancelling the pole, far from the fast pole its
+# data hold. The Nomoto form's T2 keeps its physical floor: there a pole the window cannot resolve
+# shows as T2 near zero with an error that reaches it, which the T2 = T3 valley profile turns into
+# T1's error (``online.uncertainty``); held at this share, a USV's start-up window was fitted in another
+# minimum, T2 seemingly determined, and T1 published 10 % off as OK.
+UNRESOLVED_POLE_SHARE = 1.0 / 3.0
+POLE_NAMES = ("m2",)  # the fast poles held at UNRESOLVED_POLE_SHARE of the sample time
 ACCELERATION_NAMES = ("b", "b0", "b1", "m2", "a1")
 NOMOTO_TIME_CONSTANT_LIMIT = 1e3  # s, T and T1's upper bound: a slower hull is published without them
 
@@ -291,8 +302,9 @@ class Structure:
     def bounds(self, names=None, dataset: Dataset | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of parameters: the physical ones, narrowed by the data's.
 
-        Every effect's ``data_bounds`` narrows them with ``dataset`` (e.g. cubic_yaw: stable over the
-        turn rates the data reach).
+        With ``dataset``, the fast poles (POLE_NAMES) are at least UNRESOLVED_POLE_SHARE of its sample
+        time, and every effect's ``data_bounds`` narrows them (e.g. cubic_yaw: stable over the turn rates the
+        data reach).
 
         Parameters
         ----------
@@ -308,6 +320,9 @@ class Structure:
         """
         names = self.free_names if names is None else names
         limits = {n: (self.parameter(n).lower, self.parameter(n).upper) for n in names}
+        if dataset is not None:  # a fast pole the samples cannot resolve is held at the fastest they do
+            floor = UNRESOLVED_POLE_SHARE * dataset.sample_time
+            limits.update({n: (max(lo, floor), hi) for n, (lo, hi) in limits.items() if n in POLE_NAMES})
         if dataset is not None and self.form == "nomoto":  # data bounds are stated in the Nomoto form
             for effect in self.effects:
                 data_bounds = getattr(effect, "data_bounds", None)

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..estimators.base import TRUSTED_RELATIVE_ERRORS, Z_95, loose_parameters
 from ..model.dataset import DataError
-from ..model.structure import StructureError
+from ..model.structure import UNRESOLVED_POLE_SHARE, StructureError
 
 SCATTER_PAIRS = 20  # successive estimates whose scatter sets the published uncertainty
 SCATTER_REWEIGHTINGS = 4  # least-squares passes of the scatter fit (EstimateScatter)
@@ -35,10 +35,6 @@ MIN_FRESH_SHARE = 1e-3  # two estimates' difference has at least this share of t
 # Shares of T1 above the estimate at which T2 is held to profile the cost along the T2 = T3 valley
 # (``first_order_valley``): a second pole the window cannot tell from zero may lie far beyond its 95 % end.
 VALLEY_RUNGS = (0.1, 0.2, 0.35, 0.5)
-# The profile's lowest rung holds T2 at this share of the sample time (or at T2's physical floor, when
-# higher): a second pole that fast settles within a sample (5 % of it is left after one), so the samples
-# cannot tell it from none, and a lower rung slides T1 no further (it only costs RK4 substeps).
-UNRESOLVED_POLE_SHARE = 1.0 / 3.0
 PROFILE_CLIMB_CHI2 = 16.0  # a point this far up a profile (4 standard errors) ends its climb
 # Share of the trusted limit on K's or T1's error past which an estimate is first checked along the
 # profile over the cubic damping alpha (``cubic_damping_slides``): gain and damping trade within alpha's error.

@@ -1668,7 +1668,7 @@ def recommend_determined(
     if not candidates:
         return
     views = (estimate, training, held_out, run, fitted_windows, fitted_run, method)
-    first = candidates[0] = named_as_held(first_order_view(candidates[0], *views), candidates, *views)
+    first = candidates[0] = named_as_held(first_order_view(candidates[0], *views), candidates, views)
     if first.estimate is None or not undetermined(first.estimate):
         return
     mark_near_equivalents(candidates, held_out)
@@ -1681,7 +1681,7 @@ def recommend_determined(
         index = next(i for i, c in enumerate(candidates) if c.effect == name)
         view = first_order_view(candidates[index], *views)
         if first.effect not in EFFECTS[view.effect].replaces:  # not back to the model form it displaces
-            view = named_as_held(view, candidates, *views)
+            view = named_as_held(view, candidates, views)
         if view.estimate is None or undetermined(view.estimate) or (first.significant and not view.significant):
             continue
         determined.append(view)
@@ -1693,17 +1693,7 @@ def recommend_determined(
         candidates.insert(0, best)
 
 
-def named_as_held(
-    candidate: Candidate,
-    candidates: list[Candidate],
-    estimate: Estimate,
-    training: Dataset,
-    held_out: Dataset,
-    run: FreeRun,
-    fitted_windows: Dataset,
-    fitted_run: FreeRun,
-    method: str,
-) -> Candidate:
+def named_as_held(candidate: Candidate, candidates: list[Candidate], views: tuple) -> Candidate:
     """``candidate`` named as the effect whose model its fit is, where its structure holds that one's.
 
     A course_instability fit with a positive linear damping (a1 at least ``Z_95`` standard errors above
@@ -1720,14 +1710,16 @@ def named_as_held(
         The first candidate, in its ``first_order_view``.
     candidates : list of Candidate
         Every candidate (the held effect's evidence, when it was judged too).
-    estimate, training, held_out, run, fitted_windows, fitted_run, method
-        As ``first_order_view``'s.
+    views : tuple
+        ``first_order_view``'s arguments after the candidate: (estimate, training, held_out, run,
+        fitted_windows, fitted_run, method).
 
     Returns
     -------
     Candidate
         ``candidate``, or the held effect's candidate on the same model.
     """
+    _, training, held_out, run, fitted_windows, fitted_run, method = views
     fit = candidate.estimate
     if fit is None or fit.structure.form != "acceleration" or not nomoto_parameters(fit.parameters):
         return candidate

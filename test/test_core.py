@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from ship_ident.model import structure as structure_module
 from ship_ident.model.dataset import DataError, Dataset, cut_segments, median_above, resample_series
 from ship_ident.model.filters import convolve_columns, savgol
 from ship_ident.model.simulator import simulate
@@ -38,6 +39,32 @@ def test_nomoto2_matches_lti_simulation_with_first_order_hold():
     fine = np.arange(0, 60 - h + 1e-9, 0.001)
     _, r_exact, _ = signal.lsim(system, np.interp(fine, time, rudder), fine)
     assert np.max(np.abs(r[:-1] - np.interp(time[:-1], fine, r_exact))) < 2e-5 * np.max(np.abs(r))
+
+
+def test_a_slow_ships_pole_the_samples_cannot_resolve_is_stepped_exactly(monkeypatch):
+    """A slow ship with a rudder offset (no forcing term: linear in its state), its fast pole 10 ms
+    at 0.37 s samples (RK4 would need 56 substeps per sample): one exact step per sample, equal to
+    scipy's lsim with the rudder linear between samples at rounding level, and to RK4's many
+    substeps; a course-unstable run that blows up is NaN from there on."""
+    h = 0.37
+    time = np.arange(0, 600, h)
+    rudder = np.radians(10) * np.sign(np.sin(0.05 * time))
+    data = _dataset(time, rudder)
+    p = {"K": 0.06, "T1": 20.0, "T2": 0.01, "T3": 0.5, "delta_r": 0.01}
+    offset = Structure("nomoto2", ["rudder_offset"])
+    start = [(0.0, 0.0, p["K"] * p["T3"] * p["delta_r"] / (p["T1"] * p["T2"]))]  # lsim's zero state under the offset
+    _, r = offset.simulate(p, data, initial=start)
+    system = signal.lti([p["K"] * p["T3"], p["K"]], [p["T1"] * p["T2"], p["T1"] + p["T2"], 1.0])
+    _, r_lsim, _ = signal.lsim(system, rudder + p["delta_r"], time)
+    assert np.max(np.abs(r - r_lsim)) < 1e-9 * np.max(np.abs(r))
+    _, r_runs = offset.simulate_runs([p, dict(p, T1=-20.0)], data)
+    blown = np.flatnonzero(np.isnan(r_runs[1]))
+    assert 0 < blown[0] and blown[-1] == len(time) - 1 and np.all(np.diff(blown) == 1)
+    monkeypatch.setattr(structure_module, "EXACT_STEP_SUBSTEPS", 10**9)  # RK4 from here on
+    _, r_rk4 = offset.simulate(p, data, initial=start)
+    assert np.max(np.abs(r - r_rk4)) < 1e-9 * np.max(np.abs(r))
+    _, r_runs_rk4 = offset.simulate_runs([p, dict(p, T1=-20.0)], data)
+    assert abs(np.flatnonzero(np.isnan(r_runs_rk4[1]))[0] - blown[0]) <= 1
 
 
 def test_runs_side_by_side_equal_one_run_per_segment():

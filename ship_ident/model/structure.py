@@ -47,6 +47,7 @@ import numpy as np
 from .dataset import DataError, Dataset
 from .effects import EFFECTS, Effect, ForcingTerm, Parameter
 from .integrate import TERM_FIELDS, simulate_kernel, substeps_for
+from .linear_step import simulate_linear_kernel
 
 BASE_MODELS: dict[str, tuple[Parameter, ...]] = {
     "nomoto1": (
@@ -89,6 +90,12 @@ NOMOTO_NAMES = ("K", "T", "T1", "T2", "T3")
 # minimum, T2 seemingly determined, and T1 published 10 % off as OK.
 UNRESOLVED_POLE_SHARE = 1.0 / 3.0
 POLE_NAMES = ("m2",)  # the fast poles held at UNRESOLVED_POLE_SHARE of the sample time
+# Free runs that take this many RK4 substeps per sample or more (``fit_substeps``' 1.5 per time
+# constant) hold a pole quicker than about a third of the sample time: the samples cannot resolve
+# it and RK4 spends its substeps on that pole's stability alone (a ship's 10 ms T2 at 0.37 s costs
+# it 56). A model without forcing terms, linear in its state, runs there on one exact step per
+# sample (``linear_step``).
+EXACT_STEP_SUBSTEPS = 5
 ACCELERATION_NAMES = ("b", "b0", "b1", "m2", "a1")
 NOMOTO_TIME_CONSTANT_LIMIT = 1e3  # s, T and T1's upper bound: a slower hull is published without them
 
@@ -397,7 +404,8 @@ class Structure:
             Per run, each segment's initial state (as ``simulate``'s ``initial``; an array: runs x
             segments x 3).
         substeps : int or None
-            RK4 steps per sample, shared (default: that of the fastest time constant of all runs).
+            RK4 steps per sample, shared (default: that of the fastest time constant of all runs); from
+            EXACT_STEP_SUBSTEPS on, a model without forcing terms steps exactly instead, every run alike.
 
         Returns
         -------
@@ -410,11 +418,13 @@ class Structure:
         runs = len(param_sets)
         rudder = np.empty((runs, dataset.n_samples))
         gain, tscale = np.ones_like(rudder), np.ones_like(rudder)  # unless an effect scales with the speed
+        scaled = False
         for k, p in enumerate(param_sets):
             rudder[k] = self.effective_rudder(p, dataset.time, dataset.rudder)
             scales = None if dataset.speed is None else self.speed_scales(p, dataset.speed)
             if scales is not None:
                 gain[k], tscale[k] = scales
+                scaled = True
         kernels = [self.kernel(p) for p in param_sets]
         coef = np.array([[t.coefficient for t in ts] for _, ts in kernels], dtype=float).reshape(runs, -1)
         ints = [np.array([getattr(t, f) for t in kernels[0][1]], dtype=np.int64) for f in TERM_FIELDS]
@@ -426,9 +436,12 @@ class Structure:
                 for p in param_sets
             ]
         initial = np.array(initials, dtype=float).reshape(runs, len(bounds), 3)
-        psi_out, r_out = simulate_kernel(
-            self.order, h, rudder, gain, tscale, constants, bounds, initial, coef, *ints, substeps
-        )
+        if substeps >= EXACT_STEP_SUBSTEPS and not (scaled or kernels[0][1]):
+            psi_out, r_out = simulate_linear_kernel(self.order, h, rudder, constants, bounds, initial)
+        else:
+            psi_out, r_out = simulate_kernel(
+                self.order, h, rudder, gain, tscale, constants, bounds, initial, coef, *ints, substeps
+            )
         for k, p in enumerate(param_sets):
             r_out[k] = self.measured_yaw_rate(r_out[k], p)
         return psi_out, r_out

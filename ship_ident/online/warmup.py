@@ -5,7 +5,8 @@ and kept in numba's on-disk cache (``cache=True``, next to the modules, or in ``
 Right after an install that cache is empty, and a boat's first refit would spend about 13 s
 compiling. ``warm_up`` runs the online core, as configured, over a short simulated manoeuvre: every
 kernel a refit, a change watch and a profile of the cost calls is compiled and cached with the very
-argument types they get on board. With the cache filled, it loads them in well under a second.
+argument types they get on board, and the exact step of the models linear in their state, which the
+diagnosis's linear candidates on a ship run on. With the cache filled, it loads them in well under a second.
 
 The node runs it at start in a child process at low priority (``warm_up_quietly``; the window
 fills meanwhile, and the node's first refit loads what it cached); ``make setup`` runs it once
@@ -19,6 +20,7 @@ import time
 from dataclasses import replace
 
 from ..model.simulator import simulate
+from ..model.structure import EXACT_STEP_SUBSTEPS, Structure
 from .config import OnlineConfig
 from .identifier import OnlineIdentifier, run_schedule
 from .samples import dataset_samples
@@ -45,6 +47,11 @@ def warm_up(config: OnlineConfig | None = None) -> float:
     dataset = simulate("mixed", duration=WARM_UP_SECONDS, sample_time=config.sample_time, seed=0).dataset
     for _ in run_schedule(OnlineIdentifier(config), dataset_samples(dataset)):
         pass
+    # a model linear in its state with a pole the samples cannot resolve (the diagnosis's linear
+    # candidates on a ship) runs on a kernel of its own, the exact step (``model.linear_step``)
+    bare = Structure(config.model)
+    params = {n: bare.parameter(n).initial for n in bare.parameter_names}
+    bare.simulate(params, dataset, substeps=EXACT_STEP_SUBSTEPS)
     return time.perf_counter() - started
 
 

@@ -487,37 +487,14 @@ def simulate_kernel(
         (m, n) heading (rad) and yaw rate (rad/s) of every run, NaN outside the segments. A blow-up
         (non-finite state, |r| > 1e3 rad/s) fills the rest of its segment with NaN.
     """
-    runs, n = rudder.shape
-    segments = bounds.shape[0]
-    lanes = runs * segments
-    psi_out = np.full((runs, n), np.nan)
-    r_out = np.full((runs, n), np.nan)
-    run = np.empty(lanes, dtype=np.int64)
-    first = np.empty(lanes, dtype=np.int64)
-    last = np.empty(lanes, dtype=np.int64)  # last sample a lane steps from
-    alive = np.empty(lanes, dtype=np.bool_)
-    psi, r, z = np.empty(lanes), np.empty(lanes), np.empty(lanes)
+    n = rudder.shape[1]
+    psi_out, r_out, run, first, last, alive, psi, r, z, longest = lane_starts(
+        rudder, gain_scale, time_scale, constants, bounds, initial
+    )
+    lanes = run.shape[0]
     lane_coef = np.empty((coef.shape[1], lanes))
-    longest = 0
     for lane in range(lanes):
-        j, i = lane // segments, lane % segments
-        a, b = bounds[i, 0], bounds[i, 1]
-        run[lane], first[lane], last[lane], alive[lane] = j, a, max(b - 2, a), b - a >= 2
-        longest = max(longest, b - a)
-        lane_coef[:, lane] = coef[j]
-        psi[lane], r[lane] = initial[j, i, 0], initial[j, i, 1]
-        s = time_scale[j, a]
-        z[lane] = initial_z(
-            constants[j, 0] * gain_scale[j, a],
-            constants[j, 1] * s,
-            constants[j, 2] * s,
-            constants[j, 3] * s,
-            r[lane],
-            initial[j, i, 2],
-            rudder[j, a],
-        )
-        if b > a:
-            psi_out[j, a], r_out[j, a] = psi[lane], r[lane]
+        lane_coef[:, lane] = coef[run[lane]]
     if lanes == 1:  # a single chain: scalar registers beat vector loops of length one
         if alive[0]:
             _advance_lane(
@@ -619,14 +596,89 @@ def simulate_kernel(
                 z[lane] += (
                     dt * (stage[0, 2, lane] + 2 * stage[1, 2, lane] + 2 * stage[2, 2, lane] + stage[3, 2, lane]) / 6
                 )
-        for lane in range(lanes):
-            k = first[lane] + step
-            if alive[lane] and k <= last[lane]:
-                if np.isfinite(psi[lane]) and np.isfinite(r[lane]) and abs(r[lane]) <= 1e3:
-                    psi_out[run[lane], k + 1], r_out[run[lane], k + 1] = psi[lane], r[lane]
-                else:
-                    alive[lane] = False
+        store_lanes(step, run, first, last, alive, psi, r, psi_out, r_out)
     return psi_out, r_out
+
+
+@njit(cache=True)
+def lane_starts(rudder, gain_scale, time_scale, constants, bounds, initial):
+    """The lanes of a free-run kernel, every (run, segment) pair, and their starts.
+
+    Parameters
+    ----------
+    rudder, gain_scale, time_scale, constants, bounds, initial : numpy.ndarray
+        As ``simulate_kernel``'s.
+
+    Returns
+    -------
+    psi_out, r_out : numpy.ndarray
+        (m, n) heading (rad) and yaw rate (rad/s) to be filled, NaN but for each lane's initial
+        state at its segment's first sample.
+    run, first, last : numpy.ndarray
+        Each lane's run, first sample and last sample it steps from (int64).
+    alive : numpy.ndarray
+        Whether the lane steps at all (its segment holds two samples or more).
+    psi, r, z : numpy.ndarray
+        Each lane's initial state: heading (rad), yaw rate (rad/s) and z (``initial_z``).
+    longest : int
+        Samples of the longest segment.
+    """
+    (runs, n), segments = rudder.shape, bounds.shape[0]
+    lanes = runs * segments
+    psi_out = np.full((runs, n), np.nan)
+    r_out = np.full((runs, n), np.nan)
+    run = np.empty(lanes, dtype=np.int64)
+    first = np.empty(lanes, dtype=np.int64)
+    last = np.empty(lanes, dtype=np.int64)  # last sample a lane steps from
+    alive = np.empty(lanes, dtype=np.bool_)
+    psi, r, z = np.empty(lanes), np.empty(lanes), np.empty(lanes)
+    longest = 0
+    for lane in range(lanes):
+        j, i = lane // segments, lane % segments
+        a, b = bounds[i, 0], bounds[i, 1]
+        run[lane], first[lane], last[lane], alive[lane] = j, a, max(b - 2, a), b - a >= 2
+        longest = max(longest, b - a)
+        psi[lane], r[lane] = initial[j, i, 0], initial[j, i, 1]
+        s = time_scale[j, a]
+        z[lane] = initial_z(
+            constants[j, 0] * gain_scale[j, a],
+            constants[j, 1] * s,
+            constants[j, 2] * s,
+            constants[j, 3] * s,
+            r[lane],
+            initial[j, i, 2],
+            rudder[j, a],
+        )
+        if b > a:
+            psi_out[j, a], r_out[j, a] = psi[lane], r[lane]
+    return psi_out, r_out, run, first, last, alive, psi, r, z, longest
+
+
+@njit(cache=True)
+def store_lanes(step, run, first, last, alive, psi, r, psi_out, r_out):
+    """Write each lane's state after its sample first + ``step`` at the next sample, while its segment lasts.
+
+    A lane whose state blew up (non-finite, |r| > 1e3 rad/s) stops there, the rest of its segment
+    left NaN.
+
+    Parameters
+    ----------
+    step : int
+        Samples stepped since each lane's first.
+    run, first, last, alive : numpy.ndarray
+        ``lane_starts``' lanes (``alive`` turns False where a lane blows up).
+    psi, r : numpy.ndarray
+        Each lane's heading (rad) and yaw rate (rad/s) after the step.
+    psi_out, r_out : numpy.ndarray
+        (m, n) heading and yaw rate of every run, written in place.
+    """
+    for lane in range(run.shape[0]):
+        k = first[lane] + step
+        if alive[lane] and k <= last[lane]:
+            if np.isfinite(psi[lane]) and np.isfinite(r[lane]) and abs(r[lane]) <= 1e3:
+                psi_out[run[lane], k + 1], r_out[run[lane], k + 1] = psi[lane], r[lane]
+            else:
+                alive[lane] = False
 
 
 def forcing(psi: np.ndarray, r: np.ndarray, terms) -> np.ndarray:

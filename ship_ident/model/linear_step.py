@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .integrate import initial_z
+from .integrate import lane_starts, store_lanes
 
 AUGMENTED = 5  # psi, r, z, the rudder d and its rate d'
 TAYLOR_TERMS = 12  # of exp(M h / 2^s) with its norm <= 1/4: truncation below 1e-16
@@ -106,53 +106,34 @@ def simulate_linear_kernel(order, h, rudder, constants, bounds, initial):
 
     Parameters
     ----------
-    order : int
-        1 or 2 (nomoto1, nomoto2).
-    h : float
-        Sample time (s).
-    rudder : numpy.ndarray
-        (m, n) effective rudder angle (rad) of each run.
-    constants : numpy.ndarray
-        (m, 4) K (1/s), T1, T2, T3 (s).
-    bounds : numpy.ndarray
-        (segments, 2) half-open sample ranges.
-    initial : numpy.ndarray
-        (m, segments, 3) initial heading (rad), yaw rate (rad/s), yaw acceleration (rad/s^2).
+    order, h, rudder, constants, bounds, initial
+        As ``integrate.simulate_kernel``'s: the model's order, the sample time (s), each run's
+        effective rudder (rad) and K, T1, T2, T3 (1/s, s), the segments and each lane's initial
+        heading, yaw rate and yaw acceleration (rad, rad/s, rad/s^2).
 
     Returns
     -------
     heading, yaw_rate : numpy.ndarray
-        (m, n) heading (rad) and yaw rate (rad/s) of every run, NaN outside the segments. A blow-up
-        (non-finite state, |r| > 1e3 rad/s) fills the rest of its segment with NaN.
+        (m, n) of every run, as ``integrate.simulate_kernel`` returns them (rad, rad/s; NaN outside
+        the segments and after a blow-up).
     """
     runs, n = rudder.shape
-    segments = bounds.shape[0]
-    lanes = runs * segments
-    psi_out = np.full((runs, n), np.nan)
-    r_out = np.full((runs, n), np.nan)
+    unscaled = np.ones((runs, n))
+    psi_out, r_out, run, first, last, alive, psi, r, z, longest = lane_starts(
+        rudder, unscaled, unscaled, constants, bounds, initial
+    )
+    lanes = run.shape[0]
     steps = np.empty((runs, 3, AUGMENTED))  # each run's exact step: exp(M h)'s first three rows
     for j in range(runs):
         K, T1, T2, T3 = constants[j, 0], constants[j, 1], constants[j, 2], constants[j, 3]
         steps[j] = sample_transition(order, h, K, T1, T2, T3)[:3]
-    # the lanes (run, segment) advance one sample together, in loops over the lanes (vector
-    # instructions); a lane past its segment's end repeats its last sample, unwritten
-    run, first, last = np.empty(lanes, np.int64), np.empty(lanes, np.int64), np.empty(lanes, np.int64)
-    alive = np.empty(lanes, np.bool_)
-    psi, r, z = np.empty(lanes), np.empty(lanes), np.empty(lanes)
-    d0, rate = np.empty(lanes), np.empty(lanes)
     E = np.empty((3, AUGMENTED, lanes))
-    longest = 0
     for lane in range(lanes):
-        j, i = lane // segments, lane % segments
-        a, b = bounds[i, 0], bounds[i, 1]
-        run[lane], first[lane], last[lane], alive[lane] = j, a, max(b - 2, a), b - a >= 2
-        longest = max(longest, b - a)
-        E[:, :, lane] = steps[j]
-        psi[lane], r[lane] = initial[j, i, 0], initial[j, i, 1]
-        K, T1, T2, T3 = constants[j, 0], constants[j, 1], constants[j, 2], constants[j, 3]
-        z[lane] = initial_z(K, T1, T2, T3, r[lane], initial[j, i, 2], rudder[j, a]) if order == 2 else 0.0
-        if b > a:
-            psi_out[j, a], r_out[j, a] = psi[lane], r[lane]
+        E[:, :, lane] = steps[run[lane]]
+    # the lanes advance one sample together, in loops over the lanes (vector instructions); a lane
+    # past its segment's end repeats its last sample, unwritten (z is unused by nomoto1: its row and
+    # column of exp(M h) are the identity's)
+    d0, rate = np.empty(lanes), np.empty(lanes)
     for step in range(longest - 1):
         for lane in range(lanes):
             j, k = run[lane], min(first[lane] + step, last[lane])
@@ -163,11 +144,5 @@ def simulate_linear_kernel(order, h, rudder, constants, bounds, initial):
             psi[lane] = p + E[0, 1, lane] * q + E[0, 2, lane] * w + E[0, 3, lane] * d + E[0, 4, lane] * v
             r[lane] = E[1, 1, lane] * q + E[1, 2, lane] * w + E[1, 3, lane] * d + E[1, 4, lane] * v
             z[lane] = E[2, 1, lane] * q + E[2, 2, lane] * w + E[2, 3, lane] * d + E[2, 4, lane] * v
-        for lane in range(lanes):
-            k = first[lane] + step
-            if alive[lane] and k <= last[lane]:
-                if np.isfinite(psi[lane]) and np.isfinite(r[lane]) and abs(r[lane]) <= 1e3:
-                    psi_out[run[lane], k + 1], r_out[run[lane], k + 1] = psi[lane], r[lane]
-                else:
-                    alive[lane] = False
+        store_lanes(step, run, first, last, alive, psi, r, psi_out, r_out)
     return psi_out, r_out

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 import pytest
+from node_play import LAST_REFIT_TIMEOUT, PLAY_LEAD, REFIT_PERIOD, play_to_the_end
 
 from ship_ident.commands.play import Player
 from ship_ident.io.files import read_samples, write_simulation
@@ -52,16 +53,7 @@ def node_process(env, *parameters):
     )
 
 
-LAST_REFIT_TIMEOUT = 120.0  # s of wall time for the node to catch up with the clock
 DIAGNOSIS_TIMEOUT = 300.0  # s of wall time for the node's diagnosis child to answer with a full diagnosis
-REFIT_PERIOD = 5.0  # s, the node's default
-# s: /clock at most a refit period and a tick and a half past the node's newest record, so the next
-# refit (due a period on, started at the first tick past it) is published before the one after it is
-# due: a refit due while the previous one still runs would be skipped and the record flagged
-# refit_overran (WARN, nothing trusted), which on a loaded machine is every record; a refit due as the
-# previous one returns from its publish is still skipped, and the node stalls: the lead then grows by a
-# period (``Listener.pace_by_node``)
-PLAY_LEAD = REFIT_PERIOD + 1.5 * REFIT_PERIOD / TICKS_PER_REFIT
 
 
 def played_to_the_end(env, domain_id, path, rate: float, while_running=None, lead=PLAY_LEAD, parameters=()):
@@ -71,23 +63,10 @@ def played_to_the_end(env, domain_id, path, rate: float, while_running=None, lea
     ``lead`` past the node's newest refit, ``Listener.pace_by_node``; the node's ``parameters`` as
     ``name:=value``). ``while_running(listener)`` runs then, the node
     still up; it shuts down cleanly after. The listener."""
-    samples = read_samples(path)
-    end = samples[-1].time
     node = node_process(env, *parameters)
     listener = Listener(domain_id)
     try:
-        player = Player(listener.node)
-        assert player.wait_for_subscribers(20.0)
-        player.play(samples, rate, hold=listener.pace_by_node(lead, LAST_REFIT_TIMEOUT, skipped=REFIT_PERIOD))
-
-        def caught_up():
-            return bool(listener.estimates) and listener.estimates[-1]["stamp"] >= end - REFIT_PERIOD
-
-        reached = listener.spin(LAST_REFIT_TIMEOUT, caught_up)
-        newest = listener.newest_refit()
-        assert reached, (
-            f"the node's newest refit is at {newest} s of the bag's {end:g} s after {LAST_REFIT_TIMEOUT:g} s"
-        )
+        play_to_the_end(listener, read_samples(path), rate, lead)
         assert node.poll() is None
         assert not zombie_children(node.pid)  # its finished warm-up child reaped, not left to the end
         if while_running is not None:

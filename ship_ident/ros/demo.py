@@ -191,9 +191,9 @@ class Listener:
         samples stamped on arrival. ``lead`` is a number, or a function of the listener giving it
         (a tighter lead while the node publishes at every tick of its timer). When nothing new has
         been published for STALL_S s of wall time, the lead grows by ``skipped`` s until the next
-        record: a refit that came due while the previous one was still returning from its publish
-        was skipped, and the next one is due a period later. Raises TimeoutError saying how far
-        the node got."""
+        record: a refit that came due while the previous one was still running (a first refit
+        compiling its kernels, a starved CPU) was skipped, and the next one is due a period later.
+        Raises TimeoutError saying how far the node got."""
         stalled_at = [None]  # the newest record's stamp when the node last stalled
 
         def allowed() -> float:
@@ -203,18 +203,21 @@ class Listener:
         def hold(stamp: float) -> None:
             for _ in range(HOLD_CALLBACKS):
                 self.executor.spin_once(timeout_sec=0)
-            newest = self.newest_refit()
-            if newest is None or stamp - newest <= allowed():
+            if self.newest_refit() is None or stamp - self.newest_refit() <= allowed():
                 return
-            if self.spin(min(STALL_S, timeout), lambda: stamp - self.newest_refit() <= allowed()):
-                return
-            if self.newest_refit() == newest:
-                stalled_at[0] = newest
-            if not self.spin(timeout, lambda: stamp - self.newest_refit() <= allowed()):
-                raise TimeoutError(
-                    f"the node's newest refit is at {self.newest_refit():g} s, the clock at {stamp:g} s, "
-                    f"after {timeout:g} s of waiting"
-                )
+            deadline = time.monotonic() + timeout
+            while (remaining := deadline - time.monotonic()) > 0:
+                seen = self.newest_refit()
+                if self.spin(min(STALL_S, remaining), lambda: stamp - self.newest_refit() <= allowed()):
+                    return
+                if self.newest_refit() == seen:  # nothing new for STALL_S s: a refit was skipped
+                    stalled_at[0] = seen
+                    if stamp - seen <= allowed():
+                        return
+            raise TimeoutError(
+                f"the node's newest refit is at {self.newest_refit():g} s, the clock at {stamp:g} s, "
+                f"after {timeout:g} s of waiting"
+            )
 
         return hold
 

@@ -21,6 +21,7 @@ from ship_ident.diagnosis.diagnose import (  # noqa: E402
     free_run,
     held_out_window,
     judge,
+    named_as_held,
     recommend_determined,
     recommendation_sentence,
     residual_context,
@@ -151,6 +152,28 @@ def judged_candidates(seed: int, effects: tuple) -> tuple[list, tuple]:
         evidence = EFFECTS[effect].evidence(context)
         candidates.append(judge(effect, evidence, held_windows, run, fit, training_windows, training_run))
     return candidates, (base, training, held_windows, run, training_windows, training_run, DEFAULT_METHOD)
+
+
+@pytest.mark.slow
+def test_a_course_stable_tanker_with_its_cubic_damping_in_force_is_not_offered_the_cubic_damping_again():
+    """A course-stable KVLCC2-like hull (linear yaw damping 1.4 times KVLCC2's) modelled with its cubic
+    damping: course_instability refitted on it finds a positive linear damping (a1 0.061 +- 0.015),
+    which is the cubic damping's model, the one in force. The candidate keeps its own name: a
+    diagnosis that named the model's own effect missing would have auto-add add nothing, and the
+    pool on board holds no row for it."""
+    hull = mmg.random_hull(np.random.default_rng(954239507))
+    training, held_out = mmg.hull_recordings(hull, 954239507)
+    base = _fit(Structure("nomoto2", ("cubic_yaw",)), training, DEFAULT_METHOD)
+    window = held_out_window(base.parameters, max(b - a for a, b in held_out.segments) * held_out.sample_time)
+    held_windows, training_windows = windows(held_out, window), windows(training, window)
+    run = free_run(base.structure, base.parameters, held_windows)
+    training_run = free_run(base.structure, base.parameters, training_windows)
+    evidence = EFFECTS["course_instability"].evidence(residual_context(base.structure, base.parameters, training))
+    fit = _fit(base.structure.adding("course_instability"), training, DEFAULT_METHOD, base.parameters)
+    candidate = judge("course_instability", evidence, held_windows, run, fit, training_windows, training_run)
+    assert fit.parameters["a1"] > 2.0 * fit.std_errors["a1"]  # the hull holds its course by itself
+    views = (base, training, held_windows, run, training_windows, training_run, DEFAULT_METHOD)
+    assert named_as_held(candidate, [candidate], views).effect == "course_instability"
 
 
 @pytest.mark.slow

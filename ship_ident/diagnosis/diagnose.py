@@ -1724,13 +1724,15 @@ def named_as_held(candidate: Candidate, candidates: list[Candidate], views: tupl
     Candidate
         ``candidate``, or the held effect's candidate on the same model.
     """
-    _, training, held_out, run, fitted_windows, fitted_run, method = views
+    estimate, training, held_out, run, fitted_windows, fitted_run, method = views
     fit = candidate.estimate
     if fit is None or fit.structure.form != "acceleration" or not nomoto_parameters(fit.parameters):
         return candidate
     if not fit.parameters["a1"] > Z_95 * fit.std_errors.get("a1", np.inf):
         return candidate  # the data do not tell the hull course-stable: the sign-free form stays
     for held in EFFECTS[candidate.effect].replaces:
+        if held in estimate.structure.effect_names:
+            continue  # the model in force holds that effect already: its model is nothing to add
         names = tuple(held if n == candidate.effect else n for n in fit.structure.effect_names)
         structure = Structure(fit.structure.model, names)
         start = structure.in_form(fit.parameters)

@@ -105,13 +105,18 @@ def stop(process: subprocess.Popen, timeout: float = 5.0):
     return process.returncode, out, err
 
 
+# s: SIGINT to a node's exit. The node finishes the refit in progress before it exits (compiled code
+# cannot be interrupted), and a cold refit of a model just changed takes seconds, more on a loaded machine.
+NODE_STOP_TIMEOUT = 30.0
+
+
 def shut_down(node: subprocess.Popen, listener, *feeders: subprocess.Popen | None) -> tuple[int, str]:
-    """Stop the feeders (e.g. ``play``), then the node (SIGINT), then close the listener;
-    returns the node's exit code and its output."""
+    """Stop the feeders (e.g. ``play``), then the node (SIGINT, killed after NODE_STOP_TIMEOUT s),
+    then close the listener; returns the node's exit code and its output."""
     for feeder in feeders:
         if feeder is not None:
             stop(feeder)
-    code, out, _ = stop(node)
+    code, out, _ = stop(node, NODE_STOP_TIMEOUT)
     listener.close()
     return code, out
 

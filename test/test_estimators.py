@@ -15,6 +15,7 @@ from ship_ident.estimators.lssvm import (
     ridge_primal,
 )
 from ship_ident.estimators.output_error import fold_inverse
+from ship_ident.estimators.shooting import ShootingProblem, normal_equations
 from ship_ident.model.simulator import simulate
 from ship_ident.model.structure import Structure
 
@@ -235,3 +236,28 @@ def test_the_covariance_on_the_fold_of_two_equal_poles_keeps_the_rest_determined
     assert inverse[0, 0] == pytest.approx(reduced[0, 0], rel=1e-9)
     full_rank, none_free = fold_inverse(np.column_stack([a, b]).T @ np.column_stack([a, b]))
     assert not none_free.any() and full_rank == pytest.approx(reduced, rel=1e-9)
+
+
+def test_a_ships_long_window_sums_its_sparse_normal_equations_as_scipys_products_do():
+    """A ten-minute window on 29 s shooting intervals with gaps between them (rows outside every
+    interval keep explicit zeros): J'f and J'J from the compiled pass equal scipy's sparse products
+    to the last bit, for a search step and for a polishing step's subset of columns."""
+    sim = simulate("mixed", duration=600.0, seed=2)
+    structure = Structure("nomoto2")
+    problem = ShootingProblem(
+        structure, sim.dataset, [(a, a + 290) for a in range(0, 5700, 300)], structure.free_names, {}
+    )
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal(problem.size)
+    chosen = tuple(range(problem.n_params))
+    points, steps = problem.difference_points(x, np.full(problem.n_params, np.inf), chosen)
+    rows = 2 * sim.dataset.n_samples
+    columns = problem.columns(np.concatenate([problem.owner, problem.owner]))
+    jacobian = problem.jacobian(
+        x, points, steps, rng.standard_normal((len(points), rows)), chosen, columns, sparse_matrix=True
+    )
+    f = rng.standard_normal(rows)
+    for matrix in (jacobian, jacobian[:, [0, *range(problem.n_params, problem.size)]]):
+        gradient, normal = normal_equations(matrix, f)
+        assert np.array_equal(gradient, matrix.T @ f)
+        assert np.array_equal(normal, (matrix.T @ matrix).toarray())

@@ -13,7 +13,7 @@ WARM_UP_AND_COUNT = """
 import json
 import sys
 from numba.core.registry import CPUDispatcher
-from ship_ident.estimators import innovations
+from ship_ident.estimators import innovations, shooting
 from ship_ident.io.files import read_samples
 from ship_ident.model import integrate, linear_step
 from ship_ident.online.config import OnlineConfig
@@ -26,7 +26,7 @@ for bag in sys.argv[1:]:
     records = list(run_schedule(OnlineIdentifier(OnlineConfig()), samples))
     assert any(r.new_estimate for r in records)
 counts = {}
-for module in (integrate, linear_step, innovations):
+for module in (integrate, linear_step, innovations, shooting):
     for name, kernel in vars(module).items():
         if isinstance(kernel, CPUDispatcher):
             counts[module.__name__ + "." + name] = [sum(kernel.stats.cache_hits.values()),
@@ -50,13 +50,15 @@ def _warm_up_in_a_fresh_process(cache: Path, *bags: str) -> dict:
 
 def test_first_start_compiles_the_usv_refit_kernels_once_and_the_next_start_loads_them(tmp_path):
     """With an empty cache (a fresh install) the warm-up compiles the free-run integrator, the exact
-    step of the models without forcing terms and the innovation filter and writes them to the cache;
+    step of the models without forcing terms, the innovation filter and a long window's sparse normal
+    equations and writes them to the cache;
     the next start finds every one there, and neither it nor the refits of a USV's bag after it
     compile any."""
     first = _warm_up_in_a_fresh_process(tmp_path)
     assert first["ship_ident.model.integrate.simulate_kernel"][1] >= 1
     assert first["ship_ident.estimators.innovations._whiten_blocks"][1] >= 1
     assert first["ship_ident.model.linear_step.simulate_linear_kernel"][1] >= 1
+    assert first["ship_ident.estimators.shooting._sparse_normal_equations"][1] >= 1
     assert any(tmp_path.rglob("*simulate_kernel*.nbi")) and any(tmp_path.rglob("*_whiten_blocks*.nbc"))
     second = _warm_up_in_a_fresh_process(tmp_path, str(Path(__file__).parents[1] / "bags" / "demo_seed001.mcap"))
     assert all(misses == 0 for _, misses in second.values()), second

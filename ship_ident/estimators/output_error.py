@@ -56,7 +56,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import sparse
 
 from ..model.dataset import Dataset, cut_segments
 from ..model.effects import BOUND_SHARE, slow_time_constant
@@ -64,7 +63,7 @@ from ..model.filters import convolve_columns
 from ..model.noise import robust_std
 from ..model.structure import ACCELERATION_NAMES, Structure
 from .base import Estimate, Estimator, Influence, finish_estimate, fit_substeps, scaled_inverse
-from .shooting import ShootingProblem
+from .shooting import ShootingProblem, normal_equations
 
 MAX_INTERVALS = 64  # shooting intervals per window at most (each adds 2-3 unknowns)
 CHI_SQUARE_TOLERANCE = 1e-2  # cost gains (in noise-variance units) below this end the search
@@ -141,7 +140,7 @@ def bounded_levenberg_marquardt(
     J = None  # the Jacobian at x, taken when a step is sought from x
     for iteration in range(1, max_iterations + 1):  # noqa: B007 (the count is returned)
         J = jacobian(x, f) if J is None else J
-        g, A = J.T @ f, _dense(J.T @ J)
+        g, A = normal_equations(J, f)
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         d = np.maximum(np.diag(A)[free], 1e-12)
         improved = False
@@ -183,10 +182,6 @@ def held_bounds(lower: np.ndarray, upper: np.ndarray, held: dict) -> tuple[np.nd
     return lower, upper
 
 
-def _dense(a) -> np.ndarray:
-    return a.toarray() if sparse.issparse(a) else a
-
-
 def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: int) -> tuple[np.ndarray, ...]:
     """Heteroscedasticity-and-autocorrelation-consistent standard errors (Newey and West, "A simple,
     positive semi-definite, heteroskedasticity and autocorrelation consistent covariance matrix",
@@ -199,7 +194,7 @@ def parameter_std_errors(J, f: np.ndarray, n_samples: int, p: int, bandwidth: in
     cost is linear in the samples. ``J`` may be a scipy sparse matrix. Also returns the plain
     Gauss-Newton errors sqrt(diag (J'J)^-1) (white residuals of unit variance) and each sample's
     share of their variances (``Influence``: n_samples x p, columns summing to one)."""
-    bread, free = fold_inverse(_dense(J.T @ J))
+    bread, free = fold_inverse(normal_equations(J, f)[1])
     bread = bread[:p]
     projected = np.asarray(J @ bread.T)
     squares = projected[:n_samples] ** 2 + projected[n_samples:] ** 2
@@ -355,8 +350,9 @@ class _Search:
         for number in range(START_POLISH_STEPS):
             unknowns = linear if number else gain_first
             Jc = self.jacobian(x, f, tuple(i for i in unknowns if i < p))[:, unknowns]
+            gradient, normal = normal_equations(Jc, f)
             try:
-                step = -scaled_inverse(_dense(Jc.T @ Jc)) @ np.asarray(Jc.T @ f).ravel()
+                step = -scaled_inverse(normal) @ gradient
             except np.linalg.LinAlgError:
                 break
             moved = x.copy()

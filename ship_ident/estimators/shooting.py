@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from numba import njit
 from scipy import sparse
 
 from ..model.dataset import Dataset
@@ -256,3 +257,78 @@ class ShootingProblem:
             entries = np.arange(len(columns)) * size + unknowns
             self._state_layout = (columns, entries.ravel(), unknowns.ravel())
         return self._state_layout[1], self._state_layout[2]
+
+
+def normal_equations(jacobian, residuals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Gauss-Newton gradient ``J' f`` and the normal matrix ``J' J`` (dense) of a search step.
+
+    A sparse Jacobian (``ShootingProblem.jacobian``'s: as many entries in every row, its columns
+    sorted) is summed in one compiled pass over its rows (``_sparse_normal_equations``), each sum
+    in row order as scipy's sparse products add them, so they are the same numbers without the
+    transposed and product matrices being built.
+
+    Parameters
+    ----------
+    jacobian : numpy.ndarray or scipy.sparse.csr_matrix
+        d residual / d unknown, residual rows by unknowns.
+    residuals : numpy.ndarray
+        The residual vector.
+
+    Returns
+    -------
+    gradient : numpy.ndarray
+        ``J' f`` (one per unknown).
+    normal : numpy.ndarray
+        ``J' J`` (unknowns x unknowns).
+    """
+    if not sparse.issparse(jacobian):
+        return jacobian.T @ residuals, jacobian.T @ jacobian
+    rows, size = jacobian.shape
+    values, columns = jacobian.data.reshape(rows, -1), jacobian.indices.reshape(rows, -1)
+    return _sparse_normal_equations(values, columns, residuals, size)
+
+
+@njit(cache=True)
+def _sparse_normal_equations(values, columns, residuals, size):
+    """``normal_equations`` of a Jacobian whose row ``k`` holds ``values[k]`` in ``columns[k]``.
+
+    Successive rows with the same columns (one shooting interval's) are added into a compact copy
+    of their entries, taken from the sums and put back when the columns change: every sum still
+    adds its rows one by one in row order, and the inner loop runs over contiguous memory."""
+    rows, width = values.shape
+    gradient = np.zeros(size)
+    normal = np.zeros((size, size))
+    local = np.empty((width, width))
+    local_gradient = np.empty(width)
+    start = 0
+    while start < rows:
+        stop = start + 1
+        while stop < rows and _same_columns(columns, stop, start):
+            stop += 1
+        index = columns[start]
+        for a in range(width):
+            local_gradient[a] = gradient[index[a]]
+            for b in range(width):
+                local[a, b] = normal[index[a], index[b]]
+        for row in range(start, stop):
+            f = residuals[row]
+            for a in range(width):
+                va = values[row, a]
+                local_gradient[a] += va * f
+                for b in range(width):
+                    local[a, b] += va * values[row, b]
+        for a in range(width):
+            gradient[index[a]] = local_gradient[a]
+            for b in range(width):
+                normal[index[a], index[b]] = local[a, b]
+        start = stop
+    return gradient, normal
+
+
+@njit(cache=True)
+def _same_columns(columns, row, other):
+    """Whether rows ``row`` and ``other`` of ``columns`` are equal."""
+    for a in range(columns.shape[1]):
+        if columns[row, a] != columns[other, a]:
+            return False
+    return True

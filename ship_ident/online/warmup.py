@@ -4,7 +4,8 @@ The free-run integrator and the innovation filter are numba kernels compiled on 
 and kept in numba's on-disk cache (``cache=True``, next to the modules, or in ``NUMBA_CACHE_DIR``).
 Right after an install that cache is empty, and a boat's first refit would spend about 13 s
 compiling. ``warm_up`` runs the online core, as configured, over a short simulated manoeuvre: every
-kernel a refit, a change watch and a profile of the cost calls is compiled and cached with the very
+kernel a refit, a change watch and a profile of the cost calls (a long window's sparse normal
+equations among them) is compiled and cached with the very
 argument types they get on board, and the exact step of the models linear in their state, which the
 diagnosis's linear candidates on a ship run on. With the cache filled, it loads them in well under a second.
 
@@ -19,6 +20,10 @@ import signal
 import time
 from dataclasses import replace
 
+import numpy as np
+from scipy import sparse
+
+from ..estimators.shooting import normal_equations
 from ..model.simulator import simulate
 from ..model.structure import EXACT_STEP_SUBSTEPS, Structure
 from .config import OnlineConfig
@@ -52,6 +57,9 @@ def warm_up(config: OnlineConfig | None = None) -> float:
     bare = Structure(config.model)
     params = {n: bare.parameter(n).initial for n in bare.parameter_names}
     bare.simulate(params, dataset, substeps=EXACT_STEP_SUBSTEPS)
+    # a window of more shooting intervals than SPARSE_INTERVALS (a ship's ten minutes) keeps its
+    # Jacobian sparse, and its search steps sum their normal equations in a kernel of their own
+    normal_equations(sparse.csr_matrix(np.eye(2)), np.zeros(2))
     return time.perf_counter() - started
 
 

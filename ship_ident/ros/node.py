@@ -460,12 +460,13 @@ def main(argv=None) -> int:
         while not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
     finally:
-        node.shutdown()
+        # The events executor dispatches the node's timer and QoS events from C++: it is detached,
+        # shut down and dropped before any of the node's entities is destroyed (an entity destroyed
+        # under it, or it destroyed after the node, leaves it freed memory: SIGSEGV on exit).
         executor.remove_node(node)
         executor.shutdown()
-        # The events executor holds the node's QoS events until it is destroyed; destroyed after the
-        # node and the context, it released freed events and the process died of SIGSEGV on exit.
         del executor
+        node.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -194,6 +194,20 @@ def test_a_tanker_whose_rudder_stall_runs_to_its_bound_is_recommended_the_cubic_
     assert "ranked before rudder_stall" in recommendation_sentence(first)
 
 
+def test_a_course_stable_tanker_recommended_its_course_instability_as_cubic_damping_lists_each_effect_once():
+    """A course-stable KVLCC2-like hull (linear yaw damping 1.5 times KVLCC2's): course_instability,
+    ranked first, fits a positive linear damping, so its model is cubic_yaw's and it is recommended
+    under that name. cubic_yaw's own refit gives way to it, and course_instability stays listed
+    with its own fit: a crew, and the pooled evidence on board, read a candidate by its effect (the
+    pool had named course_instability, and a window that listed cubic_yaw twice stopped the replay)."""
+    candidates, views = judged_candidates(402763083, ("course_instability", "cubic_yaw"))
+    own = candidates[0]
+    assert own.estimate.parameters["a1"] > 2.0 * own.estimate.std_errors["a1"]  # measured 0.031 +- 0.012
+    recommend_determined(candidates, *views)
+    assert [c.effect for c in candidates] == ["cubic_yaw", "course_instability"]
+    assert candidates[1] is own and "the hull holds its course, cubic_yaw's model" in candidates[0].note
+
+
 @pytest.mark.slow
 def test_a_tanker_whose_linear_damping_is_near_zero_is_recommended_the_cubic_damping_in_acceleration_form():
     """A KVLCC2-like hull with weak linear yaw damping (N_r 0.73 times KVLCC2's): cubic_yaw in

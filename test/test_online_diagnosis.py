@@ -253,6 +253,29 @@ def test_the_named_effect_changes_only_when_the_pooled_evidence_reverses():
     assert results[4]["verdict_sentence"].startswith("cubic_yaw is missing: on the 5.0 min of held-out data since")
 
 
+def test_a_tankers_named_course_instability_stays_named_when_the_newest_window_lists_it_as_cubic_damping():
+    """Minutes where course_instability removes the error the model misses name it. Then a window
+    whose course_instability fit shows a course-stable hull lists it as cubic_yaw's model (cubic_yaw
+    twice, course_instability not at all), and its slice counts course_instability with the model's
+    errors: the name rests on the pooled minutes, the record lists it first with no refit of its
+    own, and the diagnosis (on board, a refit's tick) goes through."""
+    rng = np.random.default_rng(4)
+    config = OnlineConfig(effects=())
+    diagnosis = OnlineDiagnosis()
+    missed = swell(20.0)
+    for k in range(3):
+        result = drawn_diagnosis(60.0 * (k + 1), missed, {"course_instability": 0.0, "cubic_yaw": 0.5 * missed}, rng)
+        diagnosis.finish(result, config)
+    assert result["verdict"] == "missing_effect" and result["candidates"][0]["effect"] == "course_instability"
+    newest = drawn_diagnosis(240.0, missed, {"course_instability": missed, "cubic_yaw": 0.0}, rng)
+    newest["candidates"] = [dict(newest["candidates"][1]), newest["candidates"][1]]  # cubic_yaw twice
+    diagnosis.finish(newest, config)
+    named = newest["candidates"][0]
+    assert newest["verdict"] == "missing_effect" and named["effect"] == "course_instability"
+    assert named["note"] == "not refitted here" and named["parameters"] is None
+    assert newest["add_command"].endswith('effects "[course_instability]"')
+
+
 @pytest.mark.slow
 def test_a_quick_boat_whose_yaw_damping_grows_with_the_cube_of_the_turn_rate_is_named_once_and_fixed():
     """A 15-minute trip of random rudder steps on a boat whose yaw damping has a cubic part (K

@@ -1673,7 +1673,14 @@ def recommend_determined(
     if not candidates:
         return
     views = (estimate, training, held_out, run, fitted_windows, fitted_run, method)
-    first = candidates[0] = named_as_held(first_order_view(candidates[0], *views), candidates, views)
+    own = candidates[0]
+    first = named_as_held(first_order_view(own, *views), candidates, views)
+    if first.effect == own.effect:
+        candidates[0] = first
+    else:  # its fit is the held effect's model: listed under that name in place of that effect's own
+        # refit, and under its own name after it (each effect once: a crew, and the pooled evidence on
+        # board, read a candidate by its effect)
+        candidates[:] = [first, own, *(c for c in candidates[1:] if c.effect != first.effect)]
     if first.estimate is None or not undetermined(first.estimate):
         return
     mark_near_equivalents(candidates, held_out)

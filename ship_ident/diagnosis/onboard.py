@@ -74,7 +74,7 @@ import numpy as np
 
 from ..estimators.base import excitation_shortfall
 from ..model.dataset import DataError, Dataset
-from ..model.effects import EFFECTS
+from ..model.effects import EFFECTS, Evidence
 from ..model.metrics import effective_sample_fraction
 from ..model.structure import StructureError
 from .damping_law import DAMPING_LAWS
@@ -89,6 +89,7 @@ from .diagnose import (
     PARSIMONY,
     SIGNIFICANCE_T,
     TRAINING_FRACTION,
+    Candidate,
     diagnose,
     free_run,
 )
@@ -251,6 +252,16 @@ def held_out_slice(result, since: float) -> dict | None:
     return slice_sums(
         held.time[fresh], held.sample_time, [MODEL, *names], errors, gains, float(result.noise["yaw_rate"])
     )
+
+
+def unjudged(effect: str, result: dict) -> dict:
+    """The record of a candidate the pool names that the newest window ``result`` did not judge under
+    its own name (its held-out slice counts it with the model's errors): the model's held-out
+    errors, no refit. The name rests on the earlier slices, and the record still lists it."""
+    evidence = Evidence(0.0, "not judged on the newest window: named on the pooled evidence of the earlier ones")
+    error_heading, error_yaw_rate = result.get("held_out_error_heading"), result.get("held_out_error")
+    unfitted = Candidate(effect, 0.0, False, error_heading, error_yaw_rate, evidence, note="not refitted here")
+    return unfitted.to_json()
 
 
 def window_share(result: dict, piece: dict, window_length: float) -> float:
@@ -824,6 +835,8 @@ class OnlineDiagnosis:
             if {p.name for p in EFFECTS[c["effect"]].parameters} & set(c.get("undetermined", []))
         }
         found, reversal = self._name(pool, undetermined)
+        if found is not None and all(c["effect"] != found for c in result["candidates"]):
+            result["candidates"].append(unjudged(found, result))
         self._mark(result, pool, found)
         result["pooled"] = pool.summary(self._origin)
         effects = structure[1]

@@ -3,6 +3,10 @@ on simulated trips with known hidden effects."""
 
 import copy
 import math
+import os
+import pickle
+import signal
+import threading
 import time
 from dataclasses import replace
 
@@ -11,7 +15,7 @@ import pytest
 
 from ship_ident.bench.peers import dataset_samples
 from ship_ident.diagnosis.onboard import DiagnosisWorker, OnlineDiagnosis, PooledEvidence, diagnose_window, slice_sums
-from ship_ident.model.simulator import Vessel, simulate
+from ship_ident.model.simulator import Vessel, random_vessel, simulate
 from ship_ident.online.config import OnlineConfig
 from ship_ident.online.identifier import OnlineIdentifier, run_schedule
 
@@ -145,6 +149,32 @@ def test_the_worker_diagnoses_in_a_child_process_one_at_a_time():
     finally:
         worker.close()
     assert not math.isnan(result["held_out_error"])
+
+
+def test_a_ships_ten_minute_window_is_handed_to_a_child_that_cannot_read_yet_without_holding_the_refit():
+    """A slow ship's 600 s window pickles to far more than a pipe holds (64 KiB): a child that cannot
+    read yet (stopped here, as one still importing at low priority on a loaded machine is in
+    effect) must not hold the refit thread that submits it. Once the child runs, the diagnosis
+    comes back."""
+    sim = simulate("random", vessel=random_vessel(np.random.default_rng(3), "ship"), duration=600.0, seed=3)
+    job = (sim.dataset, "nomoto2", (), 600.0, -math.inf)
+    assert len(pickle.dumps(job)) > 4 * 65536
+    worker = DiagnosisWorker()
+    try:
+        worker.start()
+        os.kill(worker._process.pid, signal.SIGSTOP)
+        submitting = threading.Thread(target=worker.submit, args=(job,), daemon=True)
+        submitting.start()
+        submitting.join(timeout=30.0)
+        held = submitting.is_alive()
+        os.kill(worker._process.pid, signal.SIGCONT)
+        assert not held, "submit waited for the child to read the window"
+        deadline = time.monotonic() + 300.0
+        while (result := worker.poll()) is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert result is not None and result["stamp"] == 600.0 and result["status"] == "done"
+    finally:
+        worker.close()
 
 
 # --- the pooled evidence, on held-out errors drawn here --------------------------------------

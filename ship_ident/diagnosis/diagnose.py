@@ -164,6 +164,15 @@ class Candidate:
     together: Candidate | None = None
 
     def to_json(self) -> dict:
+        """The candidate as the diagnosis record lists it.
+
+        Returns
+        -------
+        dict
+            Its effect, held-out improvements (shares), significance, t statistic, evidence sentence,
+            fitted parameters (SI units; None when not fitted), the parameters they leave
+            undetermined, and the notes that qualify it.
+        """
         return {
             "effect": self.effect,
             "improvement": self.improvement,

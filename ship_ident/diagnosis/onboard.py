@@ -65,6 +65,7 @@ from __future__ import annotations
 import math
 import os
 import signal
+import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass
@@ -554,6 +555,14 @@ def _serve(connection) -> None:
         connection.send(result)
 
 
+def _send(connection, job: tuple) -> None:
+    """Send ``job`` to the child; a child that ended meanwhile is the poll's news (``DiagnosisWorker.poll``)."""
+    try:
+        connection.send(job)
+    except OSError:
+        pass
+
+
 class DiagnosisWorker:
     """Runs diagnoses in one child process at low priority, one at a time, so a refit never waits for one.
 
@@ -592,7 +601,12 @@ class DiagnosisWorker:
         """
         self.start()
         self._job = (job[3], job[1], job[2])
-        self._connection.send(job)
+        # written from a thread of its own: a pipe takes 64 KiB before its reader must read (a 180 s
+        # window at 10 Hz pickles to 87 kB), and a child still importing at low priority on a loaded
+        # machine would hold the refit that submitted the job until it reads
+        sender = threading.Thread(target=_send, args=(self._connection, job), name="ship_ident diagnosis job")
+        sender.daemon = True
+        sender.start()
 
     def poll(self) -> dict | None:
         """The finished diagnosis, or None while it runs (a dead child: a skipped record).

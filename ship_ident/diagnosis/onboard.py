@@ -948,15 +948,21 @@ class OnlineDiagnosis:
         return next(determined, leader)
 
     def _law_lead(self, pool: PooledEvidence, leader: str, undetermined: set) -> str:
-        """``leader``, or, when it is a yaw damping law, the best ranked significant damping law within
+        """``leader``, or, when it is a yaw damping law, the best ranked damping law within
         ``EQUIVALENT_MARGIN`` of its share that the law shown most often by the pooled diagnoses'
-        fits holding both laws (``damping_law``) admits, its own parameters determined. Refitted
-        apart, a quadratic damping, a cubic one and the cubic one of a course-unstable hull each
-        predict the held-out turns within a few per cent of the others, and which predicts best is
-        which search got closest to its optimum (a USV's hidden cubic damping, refitted alone,
+        fits holding both laws (``damping_law``) admits, its own parameters determined, removing
+        at least ``SMALL_SHARE`` of the pooled error at t >= ``SIGNIFICANCE_T``.
+        Refitted apart, a quadratic damping, a cubic one and the cubic one of a course-unstable hull
+        each predict the held-out turns within a few per cent of the others, and which predicts best
+        is which search got closest to its optimum (a USV's hidden cubic damping, refitted alone,
         removed 27 % where the quadratic law removed 30 %, at t 3 between them); the shape of the
         damping against the turn rate and the sign of the linear damping are what tell the laws
-        apart, and one search holding both reads them."""
+        apart, and one search holding both reads them. The leader's significance says that a
+        damping is missing and which law it takes is the fits', so the admitted law need not be
+        significant alone: a share under ``MIN_IMPROVEMENT`` is credited alone only from
+        ``CERTAIN_T``, and the same damping can reach it in one law's refits and not in the other's
+        (a USV's hidden quadratic damping: the cubic law significant at t 7.3, the quadratic law,
+        which the fits showed, removing as much at t 5.3)."""
         shown = self._shown_laws()
         if leader not in DAMPING_LAWS or not shown or leader in shown:
             return leader
@@ -964,7 +970,9 @@ class OnlineDiagnosis:
             n
             for n in sorted(shown & set(pool.names), key=lambda n: -pool.rank(n))
             if n not in undetermined
-            and pool.significant(n)
+            and pool.improvement(n) >= SMALL_SHARE
+            and pool.clear_t(n)
+            and pool.training_gain(n) >= MIN_TRAINING_GAIN
             and pool.improvement(leader) - pool.improvement(n) <= EQUIVALENT_MARGIN
         )
         return next(admitted, leader)

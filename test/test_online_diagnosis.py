@@ -570,3 +570,27 @@ def test_a_quick_boats_quadratic_damping_that_the_cubic_laws_refits_credit_more_
                 assert 3.0 < pool.t_statistic("model", "quadratic_yaw") < 6.0
                 assert pool.improvement("quadratic_yaw") > 0.05
                 assert result["near_equivalent"] == (["cubic_yaw"] if laws else [])
+
+
+def test_a_tankers_damping_laws_the_fits_do_not_show_trade_no_places_on_their_searches():
+    """An MMG tanker's damping: the fits holding both laws show the quadratic law, the cubic law is
+    named on the first minute, and from the next one Norrbin's law (course_instability) runs below
+    it at t 7 over the pool, its share 2.5 points above. Two laws the fits do not show differ by
+    their searches: the cubic law stays named. One that removes 18 points more than the named law is
+    named instead."""
+    config = OnlineConfig(effects=())
+    for later_cubic, names in ((0.6, ["cubic_yaw"] * 5), (1.5, ["cubic_yaw"] * 3 + ["course_instability"] * 2)):
+        rng = np.random.default_rng(6)
+        diagnosis = OnlineDiagnosis()
+        named = []
+        for k in range(5):
+            cubic, norrbin = (0.3, 0.6) if k == 0 else (later_cubic, 0.2)
+            left = {"cubic_yaw": swell(20.0, cubic), "course_instability": swell(20.0, norrbin)}
+            result = dict(drawn_diagnosis(60.0 * (k + 2), swell(20.0, 2.0), left, rng), damping_laws=["quadratic_yaw"])
+            diagnosis.finish(result, config)
+            named.append(result["candidates"][0]["effect"] if result["verdict"] == "missing_effect" else None)
+        pool = diagnosis._pool
+        assert pool.t_statistic("cubic_yaw", "course_instability") > 7.0
+        gap = pool.improvement("course_instability") - pool.improvement("cubic_yaw")
+        assert (gap < 0.05) if later_cubic < 1.0 else (gap > 0.15)
+        assert named == names

@@ -41,7 +41,8 @@ says so. Candidates the pool cannot tell from the named one (removing at least
 named with it as a group, with what would separate them
 (``SIGNATURES``). Among yaw damping laws, whose separate refits differ by their searches, the law
 the windows' fits holding both laws show most often (``damping_laws``) leads, and a rival law it
-does not admit reverses nothing (``_law_lead``). Adding or removing an effect starts the new
+does not admit reverses nothing, nor, when it admits neither, one within ``EQUIVALENT_MARGIN`` of
+the named law's share (``_law_lead``, ``_law_prefers``). Adding or removing an effect starts the new
 model's pool, or resumes the one it left when it was last in force (the evidence is the model's on
 this vessel: an effect tried and removed again leaves the model's minutes of evidence as they
 were); a changed vessel starts a new pool and drops the pools left.
@@ -900,7 +901,9 @@ class OnlineDiagnosis:
                 (
                     n
                     for n in ranked
-                    if n != named and pool.t_statistic(named, n) >= SIGNIFICANCE_T and not self._law_prefers(named, n)
+                    if n != named
+                    and pool.t_statistic(named, n) >= SIGNIFICANCE_T
+                    and not self._law_prefers(pool, named, n)
                 ),
                 None,
             )
@@ -982,12 +985,18 @@ class OnlineDiagnosis:
         most = max(self._laws.values(), default=0)
         return {law for law, count in self._laws.items() if count == most > 0}
 
-    def _law_prefers(self, named: str, rival: str) -> bool:
-        """Whether the damping law the pooled fits holding both laws show admits ``named`` and not
-        ``rival``, both damping laws: the rival's lower error is then its search's, not its law's
-        (``_law_lead``), and no reversal."""
+    def _law_prefers(self, pool: PooledEvidence, named: str, rival: str) -> bool:
+        """Whether ``named`` stays before ``rival``, both damping laws, the pooled fits holding both
+        laws not showing the rival's law: its lower error is then its search's, not its law's
+        (``_law_lead``), and no reversal, when the fits show ``named``'s law, or when they show
+        neither and the rival removes no more than ``EQUIVALENT_MARGIN`` beyond ``named``'s share:
+        two near-equivalent laws the fits do not show trade places on their searches alone (an MMG
+        tanker: the cubic law named, Norrbin's law below it at t 3.1 a minute later, back above it
+        the minute after, while the fits showed the quadratic law)."""
         shown = self._shown_laws()
-        return named in DAMPING_LAWS and rival in DAMPING_LAWS and named in shown and rival not in shown
+        if named not in DAMPING_LAWS or rival not in DAMPING_LAWS or rival in shown:
+            return False
+        return named in shown or pool.improvement(rival) - pool.improvement(named) <= EQUIVALENT_MARGIN
 
     @staticmethod
     def _shares(pool: PooledEvidence, group: list[str]) -> str:

@@ -47,6 +47,7 @@ import bisect
 import math
 from collections import deque
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -163,6 +164,15 @@ def block_errors(structure: Structure, params: dict, dataset: Dataset, blocks: t
     return np.array([median(e) / MEDIAN_OF_CHI2_1 for e in squared])
 
 
+class Reference(NamedTuple):
+    """A model accepted on a full window, against which the change test runs the newest data."""
+
+    end: float  # s, the end of its window
+    parameters: dict  # SI units
+    level: float  # (rad/s)^2, its usual robust mean square free-run yaw-rate error
+    std_errors: dict  # its published standard errors (SI units)
+
+
 class ChangeDetector:
     """Has the vessel changed? The newest data's out-of-sample free-run error against the usual level.
 
@@ -185,7 +195,7 @@ class ChangeDetector:
         self.ratio = ratio  # mean-square ratio (dimensionless); 0: never
         self.length = length  # s
         self.short = short  # s, the newest data of the quick test (one refit period)
-        self.references = deque()  # (window end s, parameters, usual level (rad/s)^2, standard errors)
+        self.references = deque()  # Reference, oldest first
         self.votes = 0
         self.short_votes = 0
         self.base = None  # parameters of the reference the last change was declared against, or None
@@ -221,7 +231,7 @@ class ChangeDetector:
         if len(errors):
             floor = max(dataset.noise_std("yaw_rate", 0.0) ** 2, MIN_LEVEL)
             level = max(float(np.median(errors)), floor)
-            self.references.append((float(dataset.time[-1]), params, level, dict(estimate.std_errors)))
+            self.references.append(Reference(float(dataset.time[-1]), params, level, dict(estimate.std_errors)))
 
     def forget(self) -> None:
         """Drop every reference and vote (a new model, a clock jump back: the old levels no longer apply)."""
@@ -232,9 +242,9 @@ class ChangeDetector:
     def _reference(self, before: float, drop: bool = True):
         """The newest reference fitted on data ending at or before ``before`` (s), or None; older
         ones are dropped unless ``drop`` is False."""
-        while len(self.references) > 1 and self.references[1][0] <= before and drop:
+        while len(self.references) > 1 and self.references[1].end <= before and drop:
             self.references.popleft()
-        fitted = [ref for ref in self.references if ref[0] <= before]
+        fitted = [ref for ref in self.references if ref.end <= before]
         return fitted[-1] if fitted else None
 
     def _short_ratio(self, structure: Structure, dataset: Dataset) -> float:
@@ -254,8 +264,8 @@ class ChangeDetector:
         if reference is None:
             return math.nan
         lead = int(round(self.length / dataset.sample_time))
-        (squared,) = block_squared_errors(structure, reference[1], dataset, ((stop - m, stop),), lead)
-        return largest_newest_median(squared, MIN_SHORT_SAMPLES) / MEDIAN_OF_CHI2_1 / reference[2]
+        (squared,) = block_squared_errors(structure, reference.parameters, dataset, ((stop - m, stop),), lead)
+        return largest_newest_median(squared, MIN_SHORT_SAMPLES) / MEDIAN_OF_CHI2_1 / reference.level
 
     def test(self, structure: Structure, dataset: Dataset) -> tuple[float, float | None]:
         """The change test of a refit: the newest block's error against the usual level, and where it changed.
@@ -290,8 +300,11 @@ class ChangeDetector:
             reference = self._reference(float(dataset.time[stop - 1]), drop=False)
             ratio = short
         else:
-            ratio = float(block_errors(structure, reference[1], dataset, ((stop - n, stop),), lead=n)[0]) / reference[2]
-            shifted = ratio > GAIN_TEST_RATIO and gain_shifted(structure, reference[1], dataset.slice(stop - n, stop))
+            run_error = block_errors(structure, reference.parameters, dataset, ((stop - n, stop),), lead=n)[0]
+            ratio = float(run_error) / reference.level
+            shifted = ratio > GAIN_TEST_RATIO and gain_shifted(
+                structure, reference.parameters, dataset.slice(stop - n, stop)
+            )
             self.votes = self.votes + 1 if ratio > self.ratio or shifted else 0
         if self.votes < CONFIRMATIONS and self.short_votes < CONFIRMATIONS:
             return ratio, None
@@ -352,7 +365,7 @@ class ChangeDetector:
     def _declare(self, structure: Structure, dataset: Dataset, reference) -> float:
         """A change against ``reference``: the references are forgotten, its parameters kept as
         ``base``, and the time (s) the error stepped up in the newest 2 ``length`` s is returned."""
-        _, params, level, errors = reference
+        params, level, errors = reference.parameters, reference.level, reference.std_errors
         self.forget()
         self.base, self.base_errors = params, errors
         start, stop = dataset.segments[-1]

@@ -74,6 +74,7 @@ def test_bench_speed_quick_json_is_one_object(capsys):
     assert result["benchmark"] == "speed"
     for method, times in result["median_seconds"].items():
         assert all(0 < t < 60 for t in times.values()), method
+    assert f"({result['machine']['processor']})" in benchmarks()["speed"].render(result)
 
 
 @pytest.mark.node
@@ -190,3 +191,15 @@ def test_realtime_times_the_replay_of_a_usv_bag_as_a_whole_process(tmp_path):
     replay = hour_replay(3, str(tmp_path), 120.0)
     assert replay["refits"] == 24
     assert replay["duration_s"] == 120.0 and replay["wall_s"] > 0.3 and replay["cpu_s"] > 0.3
+
+
+def test_every_timing_names_the_processor_it_ran_on():
+    """Timings move by half and more between processors: the benchmarks that time print the CPUs,
+    the processor's model (Linux's /proc/cpuinfo) and the load average beside their figures."""
+    from ship_ident.bench.common import CPU_INFO, machine, machine_line
+
+    m = machine()
+    assert m["cpus"] >= 1 and m["processor"] and m["load_average"] >= 0.0
+    if CPU_INFO.exists():
+        assert f": {m['processor']}" in CPU_INFO.read_text()
+    assert machine_line(m) == f"{m['cpus']} CPUs ({m['processor']}), load average {m['load_average']:.1f}"

@@ -26,7 +26,7 @@ import numpy as np
 from ..model.simulator import random_vessel, simulate
 from ..online.config import OnlineConfig
 from . import progress, register
-from .common import table
+from .common import machine, machine_line, table
 
 MODES = {"off": 0.0, "on": OnlineConfig().diagnosis_period}
 FIGURES = ("cpu_percent", "refit_median_ms", "refit_p95_ms")  # averaged over the vessels
@@ -132,8 +132,7 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
         "window_length": window,
         "measure_seconds": measure_s,
         "input_rate_hz": 10.0,
-        "cpus": os.cpu_count(),
-        "load_average": os.getloadavg()[0],
+        "machine": machine(),
         "rows": rows,
         "mean": mean,
         "refit_p95_ratio": mean["on"]["refit_p95_ms"] / mean["off"]["refit_p95_ms"],
@@ -174,7 +173,7 @@ def render(result: dict) -> str:
         title=(
             f"onboard (seed {result['seed']}): the node at {result['input_rate_hz']:g} Hz inputs in real time, "
             f"{result['window_length']:g} s window, measured {result['measure_seconds']:g} s after one window; "
-            f"{result['cpus']} CPUs, load average {result['load_average']:.1f}"
+            f"{machine_line(result['machine'])}"
         ),
     ) + (
         f"\nmean: CPU {mean['off']['cpu_percent']:.1f} % off / {mean['on']['cpu_percent']:.1f} % on; refit p95 "

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import table
+from .common import machine_line, table
 from .peer_experiments import OURS, RECOVERY_TOLERANCE
 
 TARGET_CRB_RATIO = 1.3
@@ -236,7 +236,7 @@ def _render_speed(speed: dict) -> list[str]:
 def render(result: dict) -> str:
     m, online = result["machine"], result["online_config"]
     out = [
-        f"peers: {m['cpus']} CPUs ({m['processor']}), OPENBLAS_NUM_THREADS={m['OPENBLAS_NUM_THREADS']}; "
+        f"peers: {machine_line(m)}, OPENBLAS_NUM_THREADS={m['OPENBLAS_NUM_THREADS']}; "
         f"ours online: {online['method']}, window {online['window_s']:.0f} s, "
         f"refit every {online['refit_period_s']:.0f} s"
     ]

@@ -47,10 +47,8 @@ of a 1-hour simulated bag (``fleet.identify_bag``, the replay loop).
 
 from __future__ import annotations
 
-import os
-import platform
-
 from . import register
+from .common import machine
 from .peer_experiments import (
     ONLINE,
     RECOVERY_TOLERANCE,
@@ -72,11 +70,7 @@ __all__ = ["RECOVERY_TOLERANCE", "dataset_samples", "online_trace", "recovery_ti
 def run(quick: bool = False, plot_dir: str | None = None) -> dict:
     scenarios = {maneuver: tracking(quick, maneuver) for maneuver in TRACKING_MANEUVERS}
     result = {
-        "machine": {
-            "cpus": os.cpu_count(),
-            "processor": platform.processor() or platform.machine(),
-            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
-        },
+        "machine": machine(),
         "online_config": {
             "method": ONLINE.method,
             "window_s": ONLINE.window_length,

@@ -21,7 +21,6 @@ machine may be shared, and the CPU time is what the work costs whatever else run
 
 from __future__ import annotations
 
-import os
 import resource
 import subprocess
 import sys
@@ -33,7 +32,7 @@ import numpy as np
 
 from ..online.config import OnlineConfig
 from . import progress, register
-from .common import table
+from .common import machine, machine_line, table
 from .onboard import QUICK, drawn_trip, measure
 
 HOUR_S = 3600.0
@@ -109,8 +108,7 @@ def run(quick: bool = False, seed: int = 0, count: int | None = None) -> dict:
         diagnosed = bundled_loop(diagnosis=True)
         node = node_refits(seed, quick, folder)
     return {
-        "cpus": os.cpu_count(),
-        "load_average": os.getloadavg()[0],
+        "machine": machine(),
         "hour_replay": hour,
         "bundled_loop": loop,
         "bundled_loop_diagnosed": diagnosed,
@@ -142,7 +140,7 @@ def render(result: dict) -> str:
         table(
             ["run", "bag s", "refits", "wall s", "x real time (wall)", "CPU s", "x real time (CPU)"],
             rows,
-            f"realtime: {result['cpus']} CPUs, load average {result['load_average']:.1f} at the end",
+            f"realtime: {machine_line(result['machine'])} at the end",
         )
         + f"\nnode at 10 Hz inputs, diagnosis every {node['diagnosis_period']:g} s ({node['vessel']}, window "
         f"{node['window_length']:g} s): refit p95 {node['refit_p95_ms']:.0f} ms wall (median "

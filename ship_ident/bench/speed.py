@@ -10,7 +10,6 @@ in-sample free run. The first fit of each size is a warm-up and not timed.
 
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
@@ -18,7 +17,7 @@ import numpy as np
 from ..estimators import make_estimator, method_names
 from ..model.simulator import simulate
 from . import progress, register
-from .common import table
+from .common import machine, machine_line, table
 
 WINDOWS = (1_000, 6_000, 60_000)
 METHODS = ("ols", "lssvm", "rlssvm", "rwlssvm", "tlssvm", "rwlssvm+oe", "rwlssvm+pem")
@@ -54,7 +53,7 @@ def run(quick: bool = False) -> dict:
             "sample_time_s": 0.1,
             "windows": list(windows),
         },
-        "machine": {"cpus": os.cpu_count(), "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "unset")},
+        "machine": machine(),
         "median_seconds": timings,
     }
 
@@ -68,7 +67,7 @@ def render(result: dict) -> str:
     return table(
         ["method"] + [f"{n} samples ms" for n in windows] + [f"ms/1k @ {n}" for n in windows],
         rows,
-        f"speed: median time of one refit (full fit), {m['cpus']} CPUs, "
+        f"speed: median time of one refit (full fit), {machine_line(m)}, "
         f"OPENBLAS_NUM_THREADS={m['OPENBLAS_NUM_THREADS']}",
     )
 

@@ -1,5 +1,7 @@
 """Playing a bag to a running identifier node at the node's pace (shared by the node tests)."""
 
+import math
+
 from ship_ident.commands.play import Player
 from ship_ident.ros.node import TICKS_PER_REFIT
 
@@ -14,8 +16,9 @@ REFIT_PERIOD = 5.0  # s, the node's default
 PLAY_LEAD = REFIT_PERIOD + 1.5 * REFIT_PERIOD / TICKS_PER_REFIT
 
 
-def play_to_the_end(listener, samples, rate: float, lead=PLAY_LEAD) -> None:
-    """Play ``samples`` to the node ``listener`` hears at up to ``rate`` x real time, then wait until
+def play_to_the_end(listener, samples, rate, lead=PLAY_LEAD) -> None:
+    """Play ``samples`` to the node ``listener`` hears at up to ``rate`` x real time (a float, or
+    (stamp s, rate) pairs: each rate from its stamp on), then wait until
     the node has published its refit of the bag's end (one a refit period from it at least). The
     pace is the node's, not the machine's: /clock never runs more than ``lead`` s past the node's
     newest record (``Listener.pace_by_node``), so a node that compiles its kernels in its first
@@ -23,7 +26,12 @@ def play_to_the_end(listener, samples, rate: float, lead=PLAY_LEAD) -> None:
     node got."""
     player = Player(listener.node)
     assert player.wait_for_subscribers(20.0)
-    player.play(samples, rate, hold=listener.pace_by_node(lead, LAST_REFIT_TIMEOUT, skipped=REFIT_PERIOD))
+    hold = listener.pace_by_node(lead, LAST_REFIT_TIMEOUT, skipped=REFIT_PERIOD)
+    rates = ((samples[0].time, rate),) if isinstance(rate, (int, float)) else tuple(rate)
+    for (begin, part_rate), (end, _) in zip(rates, (*rates[1:], (math.inf, None))):
+        part = [s for s in samples if begin <= s.time < end]
+        if part:
+            player.play(part, part_rate, hold=hold)
     end = samples[-1].time
 
     def caught_up():

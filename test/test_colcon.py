@@ -80,7 +80,8 @@ def test_built_ship_ident_starts_from_the_install_space(workspace):
 def test_built_identifier_node_with_the_params_file_starts_and_identifies(workspace, tmp_path):
     """What `ros2 run ship_ident identifier_node --ros-args --params-file ...` starts, fed the bundled
     bag at up to 20x, paced by the node: a fresh install space has no compiled kernels yet, so the
-    node's first refit compiles them."""
+    node's first refit compiles them. The diagnosis is off (at 20x it would diagnose every 3 s of
+    wall time); the node's diagnosis child is test_node's."""
     from ship_ident.io.files import read_samples
     from ship_ident.ros.demo import Listener, ros_environment, shut_down
 
@@ -93,7 +94,8 @@ def test_built_identifier_node_with_the_params_file_starts_and_identifies(worksp
     share = workspace / "install" / "ship_ident" / "share" / "ship_ident"
     command = (
         f"source install/setup.bash && exec install/ship_ident/lib/ship_ident/identifier_node "
-        f"--ros-args --params-file {share / 'config' / 'ship_ident.yaml'} -p use_sim_time:=true"
+        f"--ros-args --params-file {share / 'config' / 'ship_ident.yaml'} "
+        "-p use_sim_time:=true -p diagnosis_period:=0.0"
     )
     node = subprocess.Popen(
         ["bash", "-c", command], cwd=workspace, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True

@@ -29,14 +29,24 @@ RATE = 15.0  # x real time
 PRINT_EVERY = 30.0  # s of bag time between printed estimates
 
 
+# Fast DDS's transports for the participants started here: UDP on the loopback, not its shared-memory
+# transport. Started and stopped dozens of times a minute on one host, a participant's deletion locked a
+# shared-memory port segment another participant's stop had just released, now and then (a node's exit
+# under load, about one in sixty: SIGSEGV in SharedMemChannelResource::release); a vessel's own DDS
+# configuration is its crew's.
+TRANSPORTS = {"FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
+
+
 def ros_environment(domain_id: int, log_dir) -> dict:
-    """A copy of os.environ for a child on its own ROS domain, discovery limited to this host."""
+    """A copy of os.environ for a child on its own ROS domain, discovery limited to this host
+    (``TRANSPORTS``)."""
     env = dict(os.environ)
     env.update(
         ROS_DOMAIN_ID=str(domain_id),
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         ROS_LOG_DIR=str(log_dir),
         PYTHONUNBUFFERED="1",
+        **TRANSPORTS,
     )
     return env
 
@@ -139,7 +149,7 @@ class Listener:
         from rclpy.signals import SignalHandlerOptions
         from std_msgs.msg import Float64, Float64MultiArray, String
 
-        os.environ.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        os.environ.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", **TRANSPORTS)
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("ship_ident_listener", context=self.context)

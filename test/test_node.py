@@ -16,7 +16,7 @@ from node_play import LAST_REFIT_TIMEOUT, PLAY_LEAD, REFIT_PERIOD, play_to_the_e
 from ship_ident.commands.play import Player
 from ship_ident.io.files import read_samples, write_simulation
 from ship_ident.model.simulator import simulate
-from ship_ident.ros.demo import Listener, ros_environment, shut_down, start_node, start_play
+from ship_ident.ros.demo import STALL_S, Listener, ros_environment, shut_down, start_node, start_play
 from ship_ident.ros.node import TICKS_PER_REFIT
 
 pytestmark = [pytest.mark.slow, pytest.mark.node]  # every test here starts the node over real DDS
@@ -202,6 +202,37 @@ def test_a_change_found_between_refits_is_followed_by_the_node(env, domain_id, t
     assert following and following[0]["stamp"] < change + 15.0
     assert np.median(np.diff([e["stamp"] for e in following])) <= 1.15  # the node's ticks: a fifth of a period
     assert final_estimate(listener)["parameters"]["K"] == pytest.approx(sim.info["truth_after"]["K"], rel=0.05)
+
+
+def test_a_clock_lost_while_the_play_is_held_is_sent_again(env, domain_id, bag):
+    """The node takes /clock best effort: on a loaded machine one can be lost, and a play held for the
+    node's next refit sends no newer one. The bag's first 40 s play paced by the node; the inputs up to
+    just past its next refit then go out with their /clock lost: the hold sends the newest /clock again,
+    and the node's refit comes within seconds, not after a stall's wait."""
+    path, _ = bag
+    samples = read_samples(path)
+    node = node_process(env, NO_DIAGNOSIS, "min_window_length:=20.0", "window_length:=30.0")
+    listener = Listener(domain_id)
+    try:
+        player = Player(listener.node)
+        assert player.wait_for_subscribers(20.0)
+        hold = listener.pace_by_node(PLAY_LEAD, 30.0, skipped=REFIT_PERIOD, clock=player.republish_clock)
+        player.play([s for s in samples if s.time <= 40.0], 10.0, hold=hold)
+        listener.spin(3.0)
+        before = listener.newest_refit()
+        lost = before + REFIT_PERIOD + 0.5  # the /clock that would make the next refit due
+        for sample in (s for s in samples if 40.0 < s.time <= lost):
+            player.publish(sample.role, sample.value)
+        player.clock_time = lost  # sent and lost
+        started = time.monotonic()
+        hold(before + REFIT_PERIOD + PLAY_LEAD)  # returns once the node's refit after ``before`` is in
+        waited = time.monotonic() - started
+        assert listener.newest_refit() >= before + REFIT_PERIOD - 1e-6
+        assert waited < STALL_S / 2
+        assert node.poll() is None
+    finally:
+        code, log = shut_down(node, listener)
+    assert code == 0, log
 
 
 def test_effects_change_at_run_time(env, domain_id, bag):
@@ -396,7 +427,8 @@ def test_ctrl_c_to_the_process_group_stops_the_node_and_its_diagnosis_child_clea
     try:
         player = Player(listener.node)
         assert player.wait_for_subscribers(20.0)
-        player.play(samples, 5.0, hold=listener.pace_by_node(PLAY_LEAD, LAST_REFIT_TIMEOUT, skipped=REFIT_PERIOD))
+        hold = listener.pace_by_node(PLAY_LEAD, LAST_REFIT_TIMEOUT, skipped=REFIT_PERIOD, clock=player.republish_clock)
+        player.play(samples, 5.0, hold=hold)
         # the child runs at a lower priority: on a loaded machine its first answer can come long
         # after the bag's end (the diagnoses due meanwhile wait in its queue), so the wait is for
         # that answer, bounded only against a child that never answers

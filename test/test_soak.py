@@ -48,7 +48,7 @@ def test_node_soak_at_100_hz_for_10_simulated_minutes(env, domain_id):  # noqa: 
     waited = 0.0  # s of wall time the feed waited for the node
     # a refit that overruns skips the ticks it covers, and with /clock held nothing is due again: after
     # a stall the lead grows by one period so that the clock moves on to the next refit
-    pace_by_node = listener.pace_by_node(MAX_LEAD, CATCH_UP_TIMEOUT, skipped=REFIT_PERIOD)
+    pace_by_node = listener.pace_by_node(MAX_LEAD, CATCH_UP_TIMEOUT, skipped=REFIT_PERIOD, clock=player.republish_clock)
     try:
         assert player.wait_for_subscribers(20.0)
         listener.spin(1.0)

@@ -55,12 +55,21 @@ class Player:
             for role in ("rudder", "heading", "yaw_rate", "speed")
         }
         self.clock = node.create_publisher(Clock, "/clock", qos)
+        self.clock_time = None  # s, the newest /clock published
 
     def publish_clock(self, time_s: float) -> None:
         msg = self._Clock()
         msg.clock.sec = int(time_s // 1)
         msg.clock.nanosec = int(round((time_s - msg.clock.sec) * 1e9)) % 1_000_000_000
         self.clock.publish(msg)
+        self.clock_time = time_s
+
+    def republish_clock(self) -> None:
+        """Publish the newest /clock again (none before the first). A node takes /clock best effort
+        (rclpy's time source): one lost on a loaded machine is not sent again by DDS, and while the play
+        is held nothing newer follows it, so the node's clock would stay short of the refit it waits for."""
+        if self.clock_time is not None:
+            self.publish_clock(self.clock_time)
 
     def publish(self, role: str, value: float) -> None:
         self.publishers[role].publish(self._Float64(data=float(value)))

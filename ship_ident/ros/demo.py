@@ -133,6 +133,7 @@ def shut_down(node: subprocess.Popen, listener, *feeders: subprocess.Popen | Non
 
 HOLD_CALLBACKS = 5  # the node's outputs a pacing hold processes per /clock stamp (its stream: about one)
 STALL_S = 10.0  # s of wall time without a new record after which a pacing hold takes a skipped refit
+CLOCK_REPEAT_S = 1.0  # s of wall time between the /clock messages a pacing hold sends again while it waits
 
 
 class Listener:
@@ -199,20 +200,24 @@ class Listener:
         """The stamp (s, node clock) of the newest estimate record received, None before the first."""
         return self.estimates[-1]["stamp"] if self.estimates else None
 
-    def pace_by_node(self, lead, timeout: float, skipped: float = 0.0):
+    def pace_by_node(self, lead, timeout: float, skipped: float = 0.0, clock=None):
         """A ``Player.play`` hold that keeps /clock at most ``lead`` s (simulated) past the node's
         newest refit, waiting up to ``timeout`` s of wall time for the node to catch up (and
         processing the node's outputs meanwhile): a node starved of CPU slows the play, not loses
         samples stamped on arrival. ``lead`` is a number, or a function of the listener giving it
-        (a tighter lead while the node publishes at every tick of its timer). When nothing new has
-        been published for STALL_S s of wall time, the lead grows by ``skipped`` s until the next
-        record: a refit that came due while the previous one was still running (a first refit
-        compiling its kernels, a starved CPU) was skipped, and the next one is due a period later.
+        (a tighter lead while the node publishes at every tick of its timer). For every STALL_S s
+        of wall time without a new record, the lead grows by ``skipped`` s until the next record:
+        a refit that came due while the previous one was still running (a first refit compiling
+        its kernels, a starved CPU) was skipped, and the next one is due a period later. ``clock``
+        (``Player.republish_clock``) is called every CLOCK_REPEAT_S s while the hold waits: the
+        node takes /clock best effort, and a message lost then is never followed by a newer one.
         Raises TimeoutError saying how far the node got."""
-        stalled_at = [None]  # the newest record's stamp when the node last stalled
+        stalls = {"at": None, "count": 0}  # the newest record's stamp at the last stall, and the stalls since it
 
         def allowed() -> float:
-            extra = skipped if stalled_at[0] is not None and stalled_at[0] == self.newest_refit() else 0.0
+            extra = (
+                skipped * stalls["count"] if stalls["at"] is not None and stalls["at"] == self.newest_refit() else 0.0
+            )
             return (lead(self) if callable(lead) else lead) + extra
 
         def hold(stamp: float) -> None:
@@ -220,13 +225,18 @@ class Listener:
                 self.executor.spin_once(timeout_sec=0)
             if self.newest_refit() is None or stamp - self.newest_refit() <= allowed():
                 return
-            deadline = time.monotonic() + timeout
+            now = time.monotonic()
+            deadline, seen, quiet_since = now + timeout, self.newest_refit(), now
             while (remaining := deadline - time.monotonic()) > 0:
-                seen = self.newest_refit()
-                if self.spin(min(STALL_S, remaining), lambda: stamp - self.newest_refit() <= allowed()):
+                if self.spin(min(CLOCK_REPEAT_S, remaining), lambda: stamp - self.newest_refit() <= allowed()):
                     return
-                if self.newest_refit() == seen:  # nothing new for STALL_S s: a refit was skipped
-                    stalled_at[0] = seen
+                if clock is not None:
+                    clock()
+                if self.newest_refit() != seen:
+                    seen, quiet_since = self.newest_refit(), time.monotonic()
+                elif time.monotonic() - quiet_since >= STALL_S:  # nothing new: a refit was skipped
+                    stalls["count"] = stalls["count"] + 1 if stalls["at"] == seen else 1
+                    stalls["at"], quiet_since = seen, time.monotonic()
                     if stamp - seen <= allowed():
                         return
             raise TimeoutError(

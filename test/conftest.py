@@ -27,7 +27,7 @@ SHIP_IDENT = Path(sys.executable).parent / "ship-ident"
 # slow tests come first; its module-scoped fixtures are built at most once per worker (once_per_run:
 # once for all workers).
 LONGEST_FIRST = (
-    "test_soak.py",  # [111] 10 simulated minutes at 6x real time
+    "test_soak.py",  # [58] 5 simulated minutes at 6x real time
     "test_node.py::test_a_change_found_between_refits_is_followed_by_the_node",  # [56] 280 s at 10x, 2.5x late
     "test_node.py::test_node_converges_to_truth_and_matches_replay",  # [51] 300 s at 10x, then replay
     "test_bench.py::test_onboard_steady_quick_raises_no_missing_effect_over_dds",  # [51] 5 min at 8x

@@ -26,10 +26,8 @@ vessel's kind (a slow ship's crew gives it ten minutes). Three kinds of trip:
   less and more (``JUDGE_SPANS_S``, each printed): a Nomoto model fitted to an MMG hull's random
   steps and run free over a 200 s turning circle integrates a small error of its steady turn rate,
   so one fit's share moves by up to a quarter of the error with a minute more or less of training
-  data, and a fit that fails scores 0 (``median_shares``). Beside it, the same judge on the trip's
-  own held-out data: the heading error of the trip's last minutes, after the longest training span
-  (random steps, the kind of data the diagnosis on board holds out), and whether the effect named
-  halves that (``named_halves_on_the_trip``). ``--count 0 --none-trips 0`` draws MMG trips alone.
+  data, and a fit that fails scores 0 (``median_shares``). ``--count 0 --none-trips 0`` draws MMG
+  trips alone.
 
 Per trip:
 
@@ -337,28 +335,20 @@ def run_mmg_trip(seed: int, trip_s: float = TRIP_S, named_by_s: float = NAMED_BY
     row = trip_row(seed, "mmg", hull.name, "steps", diagnoses, duration)
     row["replay_wall_seconds"] = wall
     validation = mmg.held_out_recordings(hull, seed)
-    sample_time = run.dataset.sample_time
-    tail = run.dataset.slice(int(round((named_by_s + JUDGE_SPANS_S[-1]) / sample_time)), run.dataset.n_samples)
-    by_span, on_the_trip = [], []
+    by_span = []
     for offset in JUDGE_SPANS_S:
-        early = run.dataset.slice(0, int(round((named_by_s + offset) / sample_time)))
+        early = run.dataset.slice(0, int(round((named_by_s + offset) / run.dataset.sample_time)))
         judged = diagnose(early, "nomoto2", (), workers=1, validation=validation)
         by_span.append({c.effect: c.improvement_heading for c in judged.candidates})
-        judged = diagnose(early, "nomoto2", (), workers=1, validation=tail)
-        on_the_trip.append({c.effect: c.improvement_heading for c in judged.candidates})
     shares = median_shares(by_span)
-    trip_shares = median_shares(on_the_trip)
     row["judge_spans_seconds"] = [named_by_s + offset for offset in JUDGE_SPANS_S]
     row["judge_shares"] = {effect: [s.get(effect, 0.0) for s in by_span] for effect in shares}
     row["halving"] = {effect: share for effect, share in shares.items() if share >= HALVING}
-    row["halving_on_the_trip"] = {effect: share for effect, share in trip_shares.items() if share >= HALVING}
     done = [d for d in diagnoses if d["status"] == "done"]
     named = first_named(done, named_by_s)
     row["named_by_deadline"] = named[1] if named else None
     row["named_share"] = shares.get(named[1], float("nan")) if named else float("nan")
     row["named_halves"] = bool(named and named[1] in row["halving"])
-    row["named_share_on_the_trip"] = trip_shares.get(named[1], float("nan")) if named else float("nan")
-    row["named_halves_on_the_trip"] = bool(named and named[1] in row["halving_on_the_trip"])
     # the near-equivalent group named with it, with what would separate them: a halving effect among them
     group = next((named_effects(d) for d in done if named_effects(d) and d["stamp"] <= named_by_s), [])
     row["group_halves"] = any(effect in row["halving"] for effect in group)
@@ -433,8 +423,7 @@ def trip_line(row: dict) -> str:
             seconds = ", ".join(f"{s:.0f}" for s in row["judge_spans_seconds"])
             text += (
                 f"; named by the deadline: {row['named_by_deadline']} ({100 * row['named_share']:.0f} %: "
-                f"{spans} % fitted on {seconds} s; {100 * row['named_share_on_the_trip']:.0f} % of the trip's "
-                "own last minutes)"
+                f"{spans} % fitted on {seconds} s)"
             )
     if "dds" in row:
         dds = row["dds"]
@@ -461,7 +450,6 @@ def summary(rows: list[dict]) -> dict:
     none = [r for r in rows if r["hidden"] == "none"]
     mmg = [r for r in rows if r["hidden"] == "mmg"]
     halving = [r for r in mmg if r["halving"]]
-    halving_on_the_trip = [r for r in mmg if r["halving_on_the_trip"]]
     judged_adds = [r for r in hidden + none if r["after_add"]]
     dds = [r["dds"] for r in rows if "dds" in r]
     heard = [d for d in dds if d["received"] and np.isfinite(d["same_verdict"])]
@@ -512,8 +500,6 @@ def summary(rows: list[dict]) -> dict:
         "mmg_with_halving_effect": len(halving),
         "mmg_named_halves": share(halving, "named_halves"),
         "mmg_group_halves": share(halving, "group_halves"),
-        "mmg_with_halving_effect_on_the_trip": len(halving_on_the_trip),
-        "mmg_named_halves_on_the_trip": share(halving_on_the_trip, "named_halves_on_the_trip"),
         "mmg_missed": [
             f"{r['named_by_deadline'] or 'nothing'} named"
             + (f" (it removes {100 * r['named_share']:.0f} %)" if r["named_by_deadline"] else "")
@@ -604,11 +590,6 @@ def render(result: dict) -> str:
             f"without one, missing_effect in {result['mmg_missing_effect_without_halving']} of "
             f"{result['mmg_done_without_halving']} diagnoses"
             + (f"; missed: {'; '.join(result['mmg_missed'])}" if result["mmg_missed"] else "")
-        )
-        lines.append(
-            f"MMG trips judged on their own last minutes instead of the standard manoeuvres: "
-            f"{result['mmg_with_halving_effect_on_the_trip']} with an effect that halves the held-out heading "
-            f"error; the effect named first halves it in {percent(result['mmg_named_halves_on_the_trip'])} of them"
         )
     if result["dds_trips"]:
         lines.append(

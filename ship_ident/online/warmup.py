@@ -10,8 +10,9 @@ argument types they get on board, and the exact step of the models linear in the
 diagnosis's linear candidates on a ship run on. With the cache filled, it loads them in well under a second.
 
 The node runs it at start in a child process at low priority (``warm_up_quietly``; the window
-fills meanwhile, and the node's first refit loads what it cached); ``make setup`` runs it once
-after installing (``python -m ship_ident.online.warmup``).
+fills meanwhile, and the node's first refit loads what it cached) unless ``kernels_cached`` finds
+every kernel compiled already; ``make setup`` runs it once after installing
+(``python -m ship_ident.online.warmup``).
 """
 
 from __future__ import annotations
@@ -23,7 +24,9 @@ from dataclasses import replace
 import numpy as np
 from scipy import sparse
 
+from ..estimators import innovations, shooting
 from ..estimators.shooting import normal_equations
+from ..model import integrate, linear_step
 from ..model.simulator import simulate
 from ..model.structure import EXACT_STEP_SUBSTEPS, Structure
 from .config import OnlineConfig
@@ -34,6 +37,39 @@ from .samples import dataset_samples
 # them) on a growing window
 WARM_UP_SECONDS = 40.0
 WARM_UP_FIRST_FIT = 25.0
+# The kernels a refit calls from Python (the ones they call are compiled into them)
+ENTRY_KERNELS = (
+    integrate.simulate_kernel,
+    linear_step.simulate_linear_kernel,
+    innovations._whiten_blocks,
+    innovations._whiten_blocks_rows,
+    shooting._sparse_normal_equations,
+    shooting._same_columns,
+)
+
+
+def kernels_cached() -> bool:
+    """Whether numba's cache holds each entry kernel compiled from these sources for this machine.
+
+    Then a warm-up has nothing to compile: a process only loads them (well under a second). The
+    check reads each kernel's cache index as numba's own loading does (numba has no public call
+    for it): an index written for other sources, another numba or another processor does not
+    count, and anything that cannot be read says no (the warm-up then runs, as without the check).
+
+    Returns
+    -------
+    bool
+        True when every entry kernel has a cached version usable here.
+    """
+    try:
+        for kernel in ENTRY_KERNELS:
+            cache = kernel._cache
+            here = cache._index_key(None, kernel.targetctx.codegen())[1:]  # (machine, code hashes)
+            if not any(key[1:] == here for key in cache._cache_file._load_index()):
+                return False
+    except Exception:  # numba's internals moved: warm up, as without the check
+        return False
+    return True
 
 
 def warm_up(config: OnlineConfig | None = None) -> float:

@@ -44,7 +44,6 @@ LONGEST_FIRST = (
     # [15]
     "test_hidden_effects.py::test_a_rudder_delay_half_the_time_constant_on_a_usv_is_found_where_the_fit_without_it_sees_no_hull",
     "test_online_diagnosis.py::test_a_hidden_wind_is_named_added_by_itself_and_the_held_out_error_halves",  # [15]
-    "test_mmg.py::test_bench_hidden_effects_mmg_runs_end_to_end",  # [15]
     "test_diagnose.py::test_a_usv_with_a_rudder_offset_in_a_wind_is_told_both_are_missing_together",  # [14]
     "test_warmup.py",  # [10] a first start in a fresh cache, as a subprocess
     "test_diagnose.py::test_two_hidden_effects_are_solved_in_two_rounds",  # [9]

@@ -1,5 +1,5 @@
 """The MMG generator (``ship_ident.bench.mmg``): KVLCC2 as published, and ``bench hidden-effects
---generator mmg`` end to end on one hull."""
+--generator mmg``'s row and figures of one hull."""
 
 from __future__ import annotations
 
@@ -9,13 +9,12 @@ import pytest
 pytest.importorskip("shipmmg")
 
 from ship_ident.bench import mmg  # noqa: E402
-from ship_ident.bench.hidden_effects import render, run  # noqa: E402
+from ship_ident.bench.hidden_effects import diagnose_mmg_hull, mmg_hull_row, mmg_summary, render  # noqa: E402
 from ship_ident.cli import main  # noqa: E402
 from ship_ident.diagnosis.diagnose import (  # noqa: E402
     DEFAULT_METHOD,
     EQUIVALENT_MARGIN,
     _fit,
-    diagnose,
     first_order_sentence,
     first_order_view,
     free_run,
@@ -233,10 +232,9 @@ def test_a_course_stable_tanker_whose_cubic_damping_shows_on_its_first_order_hul
     (T2, or m2 where course_instability fits it with a positive linear damping, the same model) and
     removes 30-40 % of the held-out error of the zigzags and turning circle: not significant. On
     nomoto1 it halves the held-out heading error, against the model and against the model's own
-    first-order fit alike: cubic_yaw is missing, and the note says on which bases it was judged."""
-    hull = mmg.random_hull(np.random.default_rng(402763083))
-    training, held_out = mmg.hull_recordings(hull, 402763083)
-    result = diagnose(training, "nomoto2", (), workers=1, validation=held_out)
+    first-order fit alike: cubic_yaw is missing, and the note says on which bases it was judged.
+    Its row of ``bench hidden-effects --generator mmg`` holds every catalogued effect and renders."""
+    hull, result = diagnose_mmg_hull(402763083)
     view = result.candidates[0]
     assert view.effect == "cubic_yaw" and view.estimate.structure.model == "nomoto1"
     assert not view.second_order["significant"] and {"T2", "m2"} & set(view.second_order["undetermined"])
@@ -244,6 +242,12 @@ def test_a_course_stable_tanker_whose_cubic_damping_shows_on_its_first_order_hul
     assert view.significant and view.improvement_heading >= 0.5  # measured: 51 %, 30 % on nomoto2
     assert result.verdict == "missing_effect"
     assert "judged on nomoto2, the model's own base, and on its nomoto1 fit" in view.note
+    row = mmg_hull_row(402763083, hull, result)
+    assert set(row["candidates"]) == set(EFFECTS) and row["top"] == "cubic_yaw" and row["top_model"] == "nomoto1"
+    assert np.isfinite(row["rmse_heading_deg"]) and row["rmse_heading_deg"] > 1.0
+    assert row["halving"] == [n for n, c in row["candidates"].items() if c["improvement_heading"] >= 0.5]
+    text = render({"generator": "mmg", "mmg": mmg_summary(7, [row])})
+    assert "MMG generator, seed 7: 1 hulls" in text and "seed 402763083" in text
 
 
 @pytest.mark.slow
@@ -266,18 +270,6 @@ def test_a_rudder_stall_that_shows_in_the_held_out_turns_is_missing():
 
 
 @pytest.mark.slow
-def test_bench_hidden_effects_mmg_runs_end_to_end():
-    """One hull diagnosed across manoeuvres: every catalogued effect a candidate, figures rendered."""
-    result = run(seed=7, count=1, generator="mmg")
-    row = result["mmg"]["rows"][0]
-    print(row)
-    assert set(row["candidates"]) == set(EFFECTS)
-    assert np.isfinite(row["rmse_heading_deg"]) and row["rmse_heading_deg"] > 1.0
-    assert row["halving"] == [n for n, c in row["candidates"].items() if c["improvement_heading"] >= 0.5]
-    text = render(result)
-    assert "MMG generator, seed 7: 1 hulls" in text and f"seed {row['seed']}" in text
-
-
 def test_generator_applies_only_where_a_benchmark_has_several(capsys):
     assert main(["bench", "speed", "--generator", "mmg"]) == 2
     assert "--generator does not apply" in capsys.readouterr().err

@@ -319,15 +319,28 @@ def run_ours(quick: bool = False, seed: int = 0, count: int | None = None) -> di
     }
 
 
-def run_mmg_hull(seed: int) -> dict:
-    """One MMG hull drawn from ``seed`` (``mmg.random_hull``), diagnosed across manoeuvres: the base
-    fit, every candidate's held-out heading error, the verdict and whether the first candidate
-    halves the error with every parameter determined."""
+def diagnose_mmg_hull(seed: int) -> tuple:
+    """The MMG hull drawn from ``seed`` (``mmg.random_hull``) and its diagnosis: nomoto2 without
+    effects fitted on its training recordings, every catalogued effect a candidate, judged on its
+    held-out manoeuvres (``mmg.hull_recordings``)."""
     from . import mmg
 
     hull = mmg.random_hull(np.random.default_rng(seed))
     training, held_out = mmg.hull_recordings(hull, seed)
-    result = diagnose(training, "nomoto2", (), workers=1, validation=held_out)
+    return hull, diagnose(training, "nomoto2", (), workers=1, validation=held_out)
+
+
+def run_mmg_hull(seed: int) -> dict:
+    """One MMG hull drawn from ``seed``, diagnosed across manoeuvres (``diagnose_mmg_hull``): its row."""
+    return mmg_hull_row(seed, *diagnose_mmg_hull(seed))
+
+
+def mmg_hull_row(seed: int, hull, result) -> dict:
+    """A hull's row of the MMG figures from its diagnosis ``result``: the base fit, every
+    candidate's held-out heading error, the verdict and whether the first candidate halves the
+    error with every parameter determined."""
+    from . import mmg
+
     top = result.candidates[0]
     halving = [c.effect for c in result.candidates if c.improvement_heading >= HALVING]
     pull_out = mmg.pull_out_turn_rate(hull)
@@ -379,6 +392,11 @@ def run_mmg(quick: bool = False, seed: int = 0, count: int | None = None) -> dic
             + f", {row['verdict']}; halving: {', '.join(row['halving']) or 'none'}"
         )
         rows.append(row)
+    return mmg_summary(seed, rows)
+
+
+def mmg_summary(seed: int, rows: list) -> dict:
+    """The MMG figures over the hulls' ``rows`` (``mmg_hull_row``) drawn from ``seed``."""
     halved = [r for r in rows if r["halving"]]
     per_effect = {}
     for r in rows:

@@ -84,10 +84,11 @@ from ..online.outputs import (
 from ..online.warmup import kernels_cached, warm_up_quietly
 
 NODE_NAME = "ship_ident"
-# s a refit waits for the warm-up child still compiling the kernels; then it compiles them itself (the
-# child, at low priority, may be starved on a loaded computer). Compiling beside the child would
-# double the CPU of a first start (about 13 s of compiling each) and take no less time.
-WARM_UP_WAIT_S = 60.0
+# s a refit waits for the warm-up child still compiling the kernels: about what the compile takes on
+# an idle 2-core computer (13-15 s), for compiling beside the child would double the CPU of a first
+# start and take no less time. Then the refit compiles them itself: on a loaded computer the child,
+# at low priority, may be starved for minutes.
+WARM_UP_WAIT_S = 20.0
 # The schedule is checked this many times per refit period, and between refits the newest data are
 # watched for a change as often (twice as often, as replay does, made the diagnosis child miss its
 # verdicts at 5x playback: test_node's gyro-bias test): the gain follow runs at most this often.

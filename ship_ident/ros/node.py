@@ -28,8 +28,7 @@ type on the input topics (DDS never delivers those; reported). With
 JSON-lines files there, so the history survives a restart. At start, unless
 numba's cache holds them already, a child process at low priority compiles the
 refit's numeric kernels into that cache (``online.warmup``; after an install
-the first time) while the window fills; a refit due before it is done waits
-for it (up to WARM_UP_WAIT_S) instead of compiling them a second time.
+the first time) while the window fills.
 
 Run: ``identifier_node --ros-args --params-file config/ship_ident.yaml``
 (or ``python -m ship_ident.ros.node``). SIGINT and SIGTERM stop it cleanly.
@@ -46,11 +45,9 @@ import math  # noqa: E402
 import signal  # noqa: E402
 import sys
 import threading
-import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import fields
 from multiprocessing import get_context
-from multiprocessing.connection import wait as wait_for_exit
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -84,11 +81,6 @@ from ..online.outputs import (
 from ..online.warmup import kernels_cached, warm_up_quietly
 
 NODE_NAME = "ship_ident"
-# s a refit waits for the warm-up child still compiling the kernels: about what the compile takes on
-# an idle 2-core computer (13-15 s), for compiling beside the child would double the CPU of a first
-# start and take no less time. Then the refit compiles them itself: on a loaded computer the child,
-# at low priority, may be starved for minutes.
-WARM_UP_WAIT_S = 20.0
 # The schedule is checked this many times per refit period, and between refits the newest data are
 # watched for a change as often (twice as often, as replay does, made the diagnosis child miss its
 # verdicts at 5x playback: test_node's gyro-bias test): the gain follow runs at most this often.
@@ -332,20 +324,6 @@ class IdentifierNode(Node):
             self._report_callback_error(exc)
         self._running = self._worker.submit(self._refit)
 
-    def _wait_for_warm_up(self) -> None:
-        """Worker thread: wait (up to WARM_UP_WAIT_S) for a warm-up child still compiling the kernels,
-        so that the refit loads them from the cache instead of compiling them beside it."""
-        warm_up = self._warm_up  # the timer's thread drops it once it has ended
-        if warm_up is None or wait_for_exit([warm_up.sentinel], 0.0):
-            return
-        started = time.monotonic()
-        ended = wait_for_exit([warm_up.sentinel], WARM_UP_WAIT_S)
-        waited = time.monotonic() - started
-        if ended:
-            self.get_logger().info(f"refit waited {waited:.1f} s for the warm-up child's compiled kernels")
-        else:
-            self.get_logger().warning(f"warm-up child not done after {waited:.0f} s: the refit compiles the kernels")
-
     def _watch(self) -> None:
         """Worker thread: between refits, the quick change test (``OnlineIdentifier.watch``, rate
         limited there) at the clock's time when it runs; a change found is refitted and published at once."""
@@ -365,7 +343,6 @@ class IdentifierNode(Node):
         tick that submitted it: handed the tick's time, the identifier would read a clock stepping
         back by more than ``clock_jump_threshold`` (a bag looping) and empty the window.
         """
-        self._wait_for_warm_up()
         now = self._now()
         try:
             with self._stall_lock:  # read as the refit counts its rejected samples: a long fit overlaps
